@@ -8,26 +8,29 @@ import numpy as np
 import xarray as xr
 
 from . import scenario as S
+from .checkpoint import fingerprint
 from .coupling.rigid import simulate_rigid
 from .granular.system import Stepper
 from .results import base_attrs, granular_dataset
 
 
-def run_scenario(sc: S.Scenario, progress=None) -> xr.Dataset:
+def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None) -> xr.Dataset:
     """Run a validated scenario and return its result Dataset."""
     system, state, media = S.build_granular(sc, sc.base)
     sim = sc.simulation
     kind = sc.solid.kind if sc.solid is not None else "rigid"
     t0 = time.perf_counter()
+    fp = fingerprint(S.to_toml(sc))
     if kind == "rigid":
         stepper = Stepper(system)
-        rec = simulate_rigid(stepper, state, sim.duration, sim.dt, sim.output_every, progress)
+        rec = simulate_rigid(stepper, state, sim.duration, sim.dt, sim.output_every, progress,
+                             checkpoint if sim.checkpoint_every > 0 else None, sim.checkpoint_every, resume, fp)
         steps = int(round(rec.times[-1] / sim.dt))
         solver = {"name": "rk4-rigid", "dt": sim.dt, "steps": steps}
     else:
         from .coupling.coupled import simulate_coupled
 
-        return simulate_coupled(sc, progress)
+        return simulate_coupled(sc, progress, checkpoint, resume)
     wall = time.perf_counter() - t0
     solver["wall_time_s"] = wall
     solver["neighbour_rebuilds"] = stepper.rebuilds

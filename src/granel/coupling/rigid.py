@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..granular.system import GranularState, Stepper
+from ..checkpoint import load_checkpoint, save_checkpoint
+from ..granular.system import GranularState, Stepper, build_neighbours
 
 
 class Recorder:
@@ -43,14 +44,34 @@ def output_schedule(duration: float, dt: float, output_every: float) -> tuple[in
 
 
 def simulate_rigid(stepper: Stepper, state: GranularState, duration: float, dt: float, output_every: float,
-                   progress=None) -> Recorder:
-    """Integrate to `duration`; the solid's contact points stay put (zero motion)."""
+                   progress=None, checkpoint=None, checkpoint_every: float = 0.0, resume=None,
+                   fingerprint: str = "") -> Recorder:
+    """Integrate to `duration`; the solid's contact points stay put (zero motion).
+
+    With `checkpoint` and `checkpoint_every` > 0 the state and the outputs so far are saved
+    atomically every `checkpoint_every` of simulated time; `resume` restarts from such a file.
+    """
     rec = Recorder()
-    rec.snapshot(stepper, state)
     per, nout = output_schedule(duration, dt, output_every)
-    for k in range(nout):
+    start = 0
+    if resume is not None:
+        st, recorded, times = load_checkpoint(resume, fingerprint)
+        state.y[:] = st["y"]
+        state.t = float(st["t"])
+        stepper.nl = build_neighbours(stepper.system, st["ref_pos"])
+        rec.rec.update(recorded)
+        rec.times = times
+        start = int(st["k"])
+    else:
+        rec.snapshot(stepper, state)
+    ck_per = max(1, int(round(checkpoint_every / (per * dt)))) if checkpoint and checkpoint_every > 0 else 0
+    for k in range(start, nout):
         stepper.advance(state, dt, per)
         rec.snapshot(stepper, state)
         if progress is not None:
             progress(state.t, per)
+        if ck_per and (k + 1) % ck_per == 0 and k + 1 < nout:
+            save_checkpoint(checkpoint, fingerprint,
+                            {"y": state.y, "t": state.t, "ref_pos": stepper.nl.ref_pos, "k": k + 1},
+                            rec.rec, rec.times)
     return rec

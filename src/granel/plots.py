@@ -1,0 +1,59 @@
+"""Figures (matplotlib, Agg backend): geometry now; the paper's figures build on these helpers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Circle, Rectangle  # noqa: E402
+
+
+def save(fig, path: str | Path, dpi: int = 200) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_geometry(sc, output: str | Path, ax=None):
+    """The packing with labels, walls, the solid, the solid contact points and excitations."""
+    from .scenario import build_granular
+
+    system, state, media = build_granular(sc, sc.base)
+    own = ax is None
+    if own:
+        fig, ax = plt.subplots(figsize=(7, 7))
+    colors = ["#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3"]
+    for g in range(system.n):
+        c = colors[system.medium_index[g] % len(colors)]
+        x, y = system.pos0[g]
+        ax.add_patch(Circle((x, y), system.radius[g], fc=c, ec="k", lw=0.6, alpha=0.55))
+        ax.text(x, y, system.labels[g].split(":")[-1], ha="center", va="center", fontsize=7)
+    for w in system.walls:
+        ax.plot([w.p0[0], w.p1[0]], [w.p0[1], w.p1[1]], color="k", lw=2.5, solid_capstyle="butt")
+    if sc.solid is not None:
+        s = sc.solid
+        ax.add_patch(Rectangle((s.x0, s.y0), s.width, s.length, fc="#BBBBBB", ec="k", lw=0.8, hatch="//" if s.kind == "rigid" else None))
+        ax.plot([s.x0, s.x0 + s.width], [s.y0, s.y0], color="k", lw=3)
+        ax.plot([s.x0, s.x0 + s.width], [s.y0 + s.length, s.y0 + s.length], color="k", lw=3)
+        ax.set_title(f"{sc.name}: solid = {s.kind}")
+    for c in system.solid_contacts:
+        ax.plot(*c.point, "r.", ms=5)
+    for e in system.excitations:
+        x, y = system.pos0[e.granule]
+        d = np.asarray(e.direction, float)
+        L = 2.5 * system.radius[e.granule]
+        ax.annotate("", xy=(x - d[0] * system.radius[e.granule], y - d[1] * system.radius[e.granule]),
+                    xytext=(x - d[0] * L, y - d[1] * L), arrowprops=dict(arrowstyle="-|>", color="r", lw=2))
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    if own:
+        return save(fig, output)
+    return ax
