@@ -22,6 +22,9 @@ from .excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, constant_force, ha
 from .materials import Material
 from .units import parse_time
 
+# Hertz impact: contact duration = HERTZ_DURATION * delta_max / v = 2 (2/5) B(2/5, 1/2) delta_max / v
+HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
+
 
 class ScenarioError(ValueError):
     """An invalid scenario; the message names the field and the value."""
@@ -474,7 +477,7 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             for (Es, Rs, ms) in ((E2, R / 2, m / 2), (Ew, R, m)):
                 A = 4.0 / 3.0 * Es * math.sqrt(Rs)
                 dmax = (5.0 * ms * speed**2 / (4.0 * A)) ** 0.4
-                bounds.append(2.94324 * dmax / speed / 20.0)
+                bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
     return min(bounds) if bounds else math.inf
 
 
