@@ -162,3 +162,51 @@ def main():  # pragma: no cover
 
 if __name__ == "__main__":  # pragma: no cover
     main()
+
+
+@app.command()
+def modes(
+    scenario: str = typer.Argument("paper", help="built-in name or TOML file"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam"),
+    count: int = typer.Option(12, help="modes to print"),
+    json_out: bool = typer.Option(False, "--json", help="print JSON on stdout"),
+    plot: Optional[Path] = typer.Option(None, help="write the Fig. 6 picture (mesh and modes 1, 4, 7)"),
+    set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
+):
+    """Natural periods and kinds (bending / axial / bulk) of the solid's modes."""
+    from .solid.build import build_solid
+    from .solid.modal import classify_modes, modal_analysis
+
+    try:
+        sc = load_scenario(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
+    except S.ScenarioError as e:
+        _fail(str(e))
+    if sc.solid is None or sc.solid.kind == "rigid":
+        _fail("modes: the solid is rigid; choose --solid plate or --solid beam")
+    system, _, _ = S.build_granular(sc, sc.base)
+    model = build_solid(sc, system)
+    want = max(count, 7 if plot else 0)
+    md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)
+    n = min(count, md.count)
+    kinds = classify_modes(model, md, range(max(n, min(7, md.count))))
+    out = {
+        "solid": model.kind,
+        "dofs": model.ndof,
+        "elements": model.nelements,
+        "periods_ms": [float(p) for p in md.periods[:n] * 1e3],
+        "kinds": kinds[:n],
+        "modes_computed": md.count,
+    }
+    if plot:
+        from .plots import plot_modes
+
+        which = tuple(k for k in (0, 3, 6) if k < md.count)
+        plot_modes(model, md, kinds, which, plot)
+        out["plot"] = str(plot)
+    if json_out:
+        print(json.dumps(out, indent=2))
+        return
+    t = Table("mode", "period [ms]", "frequency [kHz]", "kind", title=f"{model.kind}: {model.ndof} DOFs, {model.nelements} elements")
+    for k in range(n):
+        t.add_row(str(k + 1), f"{md.periods[k] * 1e3:.5f}", f"{1 / md.periods[k] / 1e3:.3f}", kinds[k])
+    Console().print(t)

@@ -57,3 +57,53 @@ def plot_geometry(sc, output: str | Path, ax=None):
     if own:
         return save(fig, output)
     return ax
+
+
+def _element_outlines(model, disp=None, scale=0.0):
+    """Polygons (one per element) through the Q8 corner and mid-side nodes."""
+    xy = model.nodes + (scale * disp if disp is not None else 0.0)
+    order = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid, corner, ... around the element
+    return [xy[e[order]] for e in model.elements]
+
+
+def draw_plate(ax, model, disp=None, scale=0.0, color="k", lw=0.3, field=None, cmap="viridis", vmin=None, vmax=None):
+    from matplotlib.collections import PolyCollection
+
+    polys = _element_outlines(model, disp, scale)
+    pc = PolyCollection(polys, facecolors="none" if field is None else None, edgecolors=color, linewidths=lw)
+    if field is not None:
+        pc.set_array(np.asarray(field))
+        pc.set_cmap(cmap)
+        pc.set_clim(vmin, vmax)
+    ax.add_collection(pc)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    return pc
+
+
+def plot_modes(model, modes, kinds, which=(0, 3, 6), output="modes.png"):
+    """Fig. 6: the undeformed mesh and the shapes of the selected modes with their periods."""
+    n = len(which) + 1
+    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, 7.5), sharey=True)
+    if model.kind == "plate":
+        draw_plate(axes[0], model, lw=0.25)
+        axes[0].set_title(f"(a) mesh\n{model.info['elements']} elements, {model.ndof} DOFs", fontsize=9)
+    else:
+        axes[0].plot(model.nodes[:, 0], model.nodes[:, 1], "k.-", ms=3)
+        axes[0].set_title(f"(a) beam\n{model.info['elements']} elements, {model.ndof} DOFs", fontsize=9)
+    width = np.ptp(model.nodes[:, 0]) or 0.01
+    for ax, k, letter in zip(axes[1:], which, "bcdefgh"):
+        d = model.full_displacement(modes.shapes[:, k])
+        scale = 0.25 * width / np.abs(d).max()
+        if model.kind == "plate":
+            draw_plate(ax, model, lw=0.15, color="0.75")
+            draw_plate(ax, model, d, scale, color="C0", lw=0.3)
+        else:
+            ax.plot(model.nodes[:, 0], model.nodes[:, 1], color="0.75")
+            ax.plot(model.nodes[:, 0] + scale * d[:, 0], model.nodes[:, 1], "C0.-", ms=3)
+        ax.set_title(f"({letter}) mode {k + 1}: {kinds[k]}\nT = {modes.periods[k] * 1e3:.4g} ms", fontsize=9)
+        ax.set_xlabel("x [m]")
+        ax.set_aspect("equal")
+    axes[0].set_ylabel("y [m]")
+    fig.tight_layout()
+    return save(fig, output)

@@ -85,10 +85,11 @@ class MaterialSpec(_Strict):
 
 
 class PlateMeshSpec(_Strict):
-    nx: int = Field(8, ge=2, description="elements across the width")
+    nx: int = Field(6, ge=2, description="elements across the width")
     layer_elements: int = Field(2, ge=2, le=2, description="elements on each rigid layer (the paper: 2)")
     growth: float = Field(1.6, gt=1.0, le=3.0, description="element size growth ratio away from contacts")
-    max_size: float = Field(2.5e-3, gt=0, description="largest element size along the length [m]")
+    max_size: float = Field(2.0e-3, gt=0, description="largest element size along the length [m]")
+    x_growth: float = Field(1.5, ge=1.0, le=3.0, description="element width growth from the edges to the mid-line")
     layer_fraction: float = Field(0.1, gt=0, lt=1, description="rigid layer length / granule radius (paper: 1/10)")
     rigid_layers: bool = True
 

@@ -1,0 +1,73 @@
+"""The interface shared by every solid model (plate, beam, rigid).
+
+A solid is linear: M q'' + K q = B' F(t) in its reduced coordinates q (after clamping and the
+rigid-layer constraints), where F stacks the 2D forces applied at its contact points and
+B maps q to the contact points' displacements u = B q (2 rows per contact: x then y).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """Where a granule touches the solid: position, unit normal n_ik (granule -> solid), and
+    the reduced DOFs of the driven motion (-1 where the model has none)."""
+
+    name: str
+    position: tuple[float, float]
+    normal: tuple[float, float]
+    dof_x: int
+    dof_y: int
+    dof_rotation: int = -1
+
+
+@dataclass
+class SolidModel:
+    kind: str
+    M: sp.csr_matrix
+    K: sp.csr_matrix
+    contacts: list[ContactPoint]
+    info: dict = field(default_factory=dict)
+    # full-field recovery and plotting (None for the rigid solid)
+    T: sp.csr_matrix | None = None  # full nodal DOFs = T q
+    nodes: np.ndarray | None = None  # (n_nodes, 2) coordinates
+    elements: np.ndarray | None = None  # (n_elements, k) node indices
+    element_energies: object = None  # callable(q, v) -> (kinetic (ne,), strain (ne,))
+    element_volume: np.ndarray | None = None
+    full_displacement: object = None  # callable(q) -> (n_nodes, 2)
+
+    @property
+    def ndof(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def nelements(self) -> int:
+        return 0 if self.elements is None else len(self.elements)
+
+    def contact_map(self) -> sp.csr_matrix:
+        """B: (2 nc, ndof), u_contacts.ravel() = B q."""
+        rows, cols = [], []
+        for k, c in enumerate(self.contacts):
+            if c.dof_x >= 0:
+                rows.append(2 * k)
+                cols.append(c.dof_x)
+            if c.dof_y >= 0:
+                rows.append(2 * k + 1)
+                cols.append(c.dof_y)
+        return sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * len(self.contacts), self.ndof))
+
+    def energy(self, q, v) -> tuple[float, float]:
+        """(kinetic 1/2 v'Mv, potential 1/2 q'Kq), eq. (11)."""
+        return 0.5 * float(v @ (self.M @ v)), 0.5 * float(q @ (self.K @ q))
+
+
+def rigid_solid(contacts_positions: list[tuple[str, tuple[float, float], tuple[float, float]]]) -> SolidModel:
+    """A rigid, immovable solid: no DOFs; its contact points never move."""
+    z = sp.csr_matrix((0, 0))
+    cps = [ContactPoint(n, p, nn, -1, -1, -1) for n, p, nn in contacts_positions]
+    return SolidModel("rigid", z, z, cps, {"dofs": 0, "elements": 0})

@@ -1,0 +1,113 @@
+"""Modal analysis: mass-normalised modes of a SolidModel and a mode-kind classifier.
+
+Kinds (paper Sec. IV, Fig. 6), from the mode's symmetries under the two mirrors of the solid:
+  bending  antisymmetric about the mid-line of the width (u_x even across the width);
+  axial    symmetric across the width (u_x odd: a width-wise squeeze at most) and antisymmetric
+           up-down, so the whole solid slides along y (u_y dominant; the paper's mode 4);
+  bulk     symmetric across the width and up-down symmetric: the width squeezes/expands
+           (the paper's mode 7; by MODEL.md its u_y is also large: it is the second axial mode).
+A symmetric shock (the paper's) can only excite up-down symmetric modes: bending modes of odd
+order and bulk modes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sl
+from scipy.sparse.linalg import eigsh
+
+from .base import SolidModel
+
+
+@dataclass
+class Modes:
+    omega: np.ndarray  # (n,) rad/s, ascending
+    shapes: np.ndarray  # (ndof, n), mass-normalised: shapes' M shapes = I
+
+    @property
+    def periods(self) -> np.ndarray:
+        return 2 * np.pi / self.omega
+
+    @property
+    def count(self) -> int:
+        return len(self.omega)
+
+
+DENSE_LIMIT = 8000
+
+
+def modal_analysis(model: SolidModel, count: int | None = None) -> Modes:
+    """The lowest `count` modes (all with count=None), mass-normalised. Shift-invert Lanczos
+    for a few modes or beyond DENSE_LIMIT DOFs, else the dense symmetric solver."""
+    n = model.ndof
+    if count is not None and count > n:
+        count = n
+    if count is not None and count < min(200, n // 4):
+        # a few low modes: shift-invert Lanczos is far cheaper than the dense solver
+        w2, phi = eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")
+        order = np.argsort(w2)
+        w2, phi = w2[order], phi[:, order]
+        phi /= np.sqrt(np.einsum("ij,ij->j", phi, model.M @ phi))[None, :]
+    elif n <= DENSE_LIMIT:
+        K = model.K.toarray()
+        M = model.M.toarray()
+        sub = None if count is None else [0, count - 1]
+        w2, phi = sl.eigh(K, M, subset_by_index=sub, check_finite=False)
+    else:
+        if count is None:
+            raise ValueError(f"{n} DOFs: give a mode count (dense solution above {DENSE_LIMIT} DOFs is not attempted)")
+        w2, phi = eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")
+        order = np.argsort(w2)
+        w2, phi = w2[order], phi[:, order]
+        # normalise to M (eigsh returns M-orthonormal vectors already; guard anyway)
+        phi /= np.sqrt(np.einsum("ij,ij->j", phi, model.M @ phi))[None, :]
+    w2 = np.maximum(w2, 0.0)
+    return Modes(np.sqrt(w2), phi)
+
+
+def _sample_grid(model: SolidModel, nx=9, ny=81):
+    x0, x1 = model.nodes[:, 0].min(), model.nodes[:, 0].max()
+    y0, y1 = model.nodes[:, 1].min(), model.nodes[:, 1].max()
+    xs = np.linspace(x0, x1, nx)
+    ys = np.linspace(y0, y1, ny)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    return X.ravel(), Y.ravel(), 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+
+
+def _mirror_probes(model: SolidModel):
+    """Point-evaluation matrices at a sample grid and at its two mirror images (cached)."""
+    cached = getattr(model, "_mirror_probes", None)
+    if cached is None:
+        basis = model.basis
+        X, Y, xc, yc = _sample_grid(model)
+        cached = (basis.probes(np.vstack([X, Y])), basis.probes(np.vstack([2 * xc - X, Y])),
+                  basis.probes(np.vstack([X, 2 * yc - Y])), len(X))
+        model._mirror_probes = cached
+    return cached
+
+
+def symmetry_coefficients(model: SolidModel, shape: np.ndarray) -> tuple[float, float]:
+    """(width-mirror, up-down-mirror) symmetry of a plate field in reduced coordinates, each in
+    [-1, 1]: +1 symmetric, -1 antisymmetric. The width mirror flips u_x, the up-down one u_y."""
+    P, Pw, Pu, npt = _mirror_probes(model)
+    full = model.T @ shape
+    u, uw, uu = P @ full, Pw @ full, Pu @ full
+    mw = np.concatenate([-uw[:npt], uw[npt:]])
+    mu = np.concatenate([uu[:npt], -uu[npt:]])
+    return float(u @ mw / (u @ u)), float(u @ mu / (u @ u))
+
+
+def classify_modes(model: SolidModel, modes: Modes, which=None) -> list[str]:
+    """Kind of each mode (bending / axial / bulk); all beam modes are bending."""
+    idx = range(modes.count) if which is None else which
+    if model.kind == "beam":
+        return ["bending" for _ in idx]
+    if model.kind != "plate":
+        return ["rigid" for _ in idx]
+    kinds = []
+    for k in idx:
+        s_width, s_updown = symmetry_coefficients(model, modes.shapes[:, k])
+        kinds.append("bending" if s_width < 0 else ("axial" if s_updown < 0 else "bulk"))
+    return kinds

@@ -1,0 +1,252 @@
+"""Plane-stress plate (eq. 7) with 8-node serendipity quadrilaterals, consistent mass,
+clamped top and bottom edges, and massless rigid layers at the contact points (Sec. II B).
+
+Assembly uses scikit-fem (ElementQuadS2 on straight-sided quads: the isoparametric Q8 with
+mid-side nodes at the edge midpoints). Rigid layers are multipoint constraints applied by a
+transformation x = T q: each layer's nodes follow the rigid motion (u_x, u_y, theta) of its mid
+node, so M_r = T'MT and K_r = T'KT.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, BilinearForm, ElementQuadS2, ElementVector, Functional, MeshQuad
+from skfem.helpers import ddot, dot, sym_grad
+
+from .base import ContactPoint, SolidModel
+
+
+@dataclass(frozen=True)
+class LayerSpec:
+    """A rigid layer on a vertical edge: the contact name, edge ('left'/'right'), centre height,
+    length (R/10 in the paper) and the contact normal n_ik (granule -> solid)."""
+
+    name: str
+    edge: str
+    y: float
+    length: float
+
+
+def _graded(length: float, n: int, growth: float, cap_ratio: float = np.inf) -> np.ndarray:
+    """n sizes summing to `length`, growing by `growth` from both ends toward the middle
+    (capped at cap_ratio times the end size)."""
+    k = np.arange(n)
+    w = np.minimum(growth ** np.minimum(k, n - 1 - k), cap_ratio)
+    return length * w / w.sum()
+
+
+def _count(length: float, first: float, growth: float, max_size: float) -> int:
+    """Elements needed to fill `length` growing from `first` at both ends, sizes <= max_size."""
+    n, total, s = 0, 0.0, first
+    while total < length:
+        total += 2 * min(s, max_size)
+        n += 2
+        s *= growth
+    # drop a pair if we overshot by more than half an element
+    if n > 2 and total - length > min(s / growth, max_size):
+        n -= 1
+    return max(n, 1)
+
+
+def edge_distribution(y0: float, length: float, layers: list[tuple[float, float]], counts=None,
+                      growth: float = 1.6, max_size: float = 2.5e-3):
+    """Node heights along a vertical edge: exactly two elements on each layer (centre, half
+    length) and graded elements between. `counts` fixes the element count of each gap so that
+    both edges share one logical grid; returns (nodes, counts)."""
+    keys = [y0]
+    firsts = []
+    for yc, a in sorted(layers):
+        keys += [yc - a, yc, yc + a]
+        firsts.append(a)
+    keys.append(y0 + length)
+    keys = np.array(keys)
+    if np.any(np.diff(keys) <= 0):
+        raise ValueError("rigid layers overlap each other or the clamped edges")
+    gaps = [(keys[0], keys[1], firsts[0] if firsts else max_size)]
+    for k in range(len(layers)):
+        lo = keys[3 * k + 3]
+        hi = keys[3 * k + 4]
+        a = max(firsts[k], firsts[k + 1] if k + 1 < len(layers) else firsts[k])
+        gaps.append((lo, hi, a))
+    out = [y0]
+    new_counts = []
+    for g, (lo, hi, a) in enumerate(gaps):
+        n = _count(hi - lo, a * growth, growth, max_size) if counts is None else counts[g]
+        new_counts.append(n)
+        sizes = _graded(hi - lo, n, growth, max_size / (a * growth) if a > 0 else np.inf)
+        out += list(lo + np.cumsum(sizes))
+        if g < len(layers):
+            yc = keys[3 * g + 2]
+            out += [yc, keys[3 * g + 3]]
+    return np.array(out), new_counts
+
+
+def plate_mesh(x0, y0, width, length, left_layers, right_layers, nx=8, growth=1.6, max_size=2.5e-3,
+               x_growth=1.5):
+    """A structured Q8 mesh, graded toward the contact points.
+
+    Both vertical edges get node heights with exactly two elements on each rigid layer; the
+    interior nodes blend the two edge distributions linearly across the width, so every layer
+    is matched exactly while elements stay nearly rectangular. Layer heights missing on one edge
+    are mirrored from the other so that the two distributions have the same structure.
+    """
+    heights = sorted({round(y, 12) for y, _ in left_layers} | {round(y, 12) for y, _ in right_layers})
+    L = {round(y, 12): a for y, a in left_layers}
+    R = {round(y, 12): a for y, a in right_layers}
+    lay_l = [(h, L.get(h, R.get(h))) for h in heights]
+    lay_r = [(h, R.get(h, L.get(h))) for h in heights]
+    _, cl = edge_distribution(y0, length, lay_l, None, growth, max_size)
+    _, cr = edge_distribution(y0, length, lay_r, None, growth, max_size)
+    counts = [max(a, b) for a, b in zip(cl, cr)]
+    yl, _ = edge_distribution(y0, length, lay_l, counts, growth, max_size)
+    yr, _ = edge_distribution(y0, length, lay_r, counts, growth, max_size)
+    xs = x0 + np.concatenate([[0.0], np.cumsum(_graded(width, nx, x_growth))])
+    xs[-1] = x0 + width
+    xi = (xs - x0) / width
+    ny = len(yl) - 1
+    X = np.repeat(xs[:, None], ny + 1, axis=1)  # (nx+1, ny+1)
+    Y = (1 - xi[:, None]) * yl[None, :] + xi[:, None] * yr[None, :]
+    p = np.vstack([X.ravel(), Y.ravel()])  # node (i, j) -> i * (ny + 1) + j
+    idx = lambda i, j: i * (ny + 1) + j  # noqa: E731
+    t = []
+    for i in range(nx):
+        for j in range(ny):
+            t.append([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)])
+    return MeshQuad(p, np.array(t, dtype=np.int64).T)
+
+
+def plane_stress_forms(E, nu, rho, h):
+    lam = E * nu / (1 - nu**2)  # plane-stress Lame parameter: gives D of eq. (7)
+    mu = E / (2 * (1 + nu))
+
+    def stress(eps):
+        return 2 * mu * eps + lam * _tr_identity(eps)
+
+    @BilinearForm
+    def stiffness(u, v, w):
+        return h * ddot(stress(sym_grad(u)), sym_grad(v))
+
+    @BilinearForm
+    def mass(u, v, w):
+        return h * rho * dot(u, v)
+
+    @Functional
+    def strain_energy(w):
+        eps = sym_grad(w["u"])
+        return 0.5 * h * ddot(stress(eps), eps)
+
+    @Functional
+    def kinetic_energy(w):
+        return 0.5 * h * rho * dot(w["v"], w["v"])
+
+    return stiffness, mass, strain_energy, kinetic_energy
+
+
+def _tr_identity(eps):
+    tr = eps[0, 0] + eps[1, 1]
+    out = np.zeros_like(eps)
+    out[0, 0] = tr
+    out[1, 1] = tr
+    return out
+
+
+def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], nx=8, growth=1.6,
+                max_size=2.5e-3, x_growth=1.5, rigid_layers=True, clamped=(True, True)) -> SolidModel:
+    """Assemble the reduced plate model with its contact points (one per layer)."""
+    left = [(l.y, l.length / 2) for l in layers if l.edge == "left"]
+    right = [(l.y, l.length / 2) for l in layers if l.edge == "right"]
+    mesh = plate_mesh(x0, y0, width, length, left, right, nx, growth, max_size, x_growth)
+    basis = Basis(mesh, ElementVector(ElementQuadS2()), intorder=4)
+    Kf, Mf, strain_energy, kinetic_energy = plane_stress_forms(E, nu, rho, thickness)
+    K = Kf.assemble(basis).tocsr()
+    M = Mf.assemble(basis).tocsr()
+    loc = basis.doflocs  # (2, N): position of each DOF's node
+    N = basis.N
+    comp = np.zeros(N, dtype=np.int64)  # 0 = x, 1 = y
+    comp[basis.nodal_dofs[1]] = 1
+    comp[basis.facet_dofs[1]] = 1
+    tol = 1e-9 * length
+    fixed = np.zeros(N, bool)
+    if clamped[0]:
+        fixed |= np.abs(loc[1] - y0) < tol
+    if clamped[1]:
+        fixed |= np.abs(loc[1] - (y0 + length)) < tol
+    # rigid layers: DOFs on the edge within the layer's extent
+    slave = -np.ones(N, dtype=np.int64)  # layer index for constrained DOFs
+    mids = []
+    for k, lay in enumerate(layers):
+        xe = x0 if lay.edge == "left" else x0 + width
+        on = (np.abs(loc[0] - xe) < tol) & (np.abs(loc[1] - lay.y) <= lay.length / 2 + tol)
+        mid = on & (np.abs(loc[1] - lay.y) < tol)
+        mx = int(np.flatnonzero(mid & (comp == 0))[0])
+        my = int(np.flatnonzero(mid & (comp == 1))[0])
+        mids.append((mx, my))
+        if rigid_layers:
+            n_on = int(on.sum())
+            if n_on != 10:
+                raise RuntimeError(f"layer {lay.name}: expected 5 nodes (two Q8 elements), found {n_on // 2}")
+            slave[on & ~mid] = k
+    # reduced numbering: free unconstrained DOFs, then one rotation per layer
+    keep = ~fixed & (slave < 0)
+    red = -np.ones(N, dtype=np.int64)
+    red[keep] = np.arange(keep.sum())
+    nq = int(keep.sum())
+    rot = []
+    rows, cols, vals = list(np.flatnonzero(keep)), list(red[keep]), [1.0] * nq
+    for k, lay in enumerate(layers):
+        if not rigid_layers:
+            rot.append(-1)
+            continue
+        r = nq + len([x for x in rot if x >= 0])
+        rot.append(r)
+        mx, my = mids[k]
+        for d in np.flatnonzero(slave == k):
+            if comp[d] == 0:  # u_x = U_x - theta (y - y_c)
+                rows += [d, d]
+                cols += [red[mx], r]
+                vals += [1.0, -(loc[1, d] - lay.y)]
+            else:  # u_y = U_y + theta (x - x_c) = U_y on a vertical edge
+                rows += [d, d]
+                cols += [red[my], r]
+                vals += [1.0, loc[0, d] - loc[0, mx]]
+    nred = nq + sum(1 for x in rot if x >= 0)
+    T = sp.csr_matrix((vals, (rows, cols)), shape=(N, nred))
+    Mr = (T.T @ M @ T).tocsr()
+    Kr = (T.T @ K @ T).tocsr()
+    contacts = []
+    for k, lay in enumerate(layers):
+        xe = x0 if lay.edge == "left" else x0 + width
+        nrm = (1.0, 0.0) if lay.edge == "left" else (-1.0, 0.0)
+        mx, my = mids[k]
+        contacts.append(ContactPoint(lay.name, (xe, lay.y), nrm, int(red[mx]), int(red[my]), int(rot[k])))
+    # node numbering for plotting: vertices then edge midpoints (skfem's DOF order)
+    vx = basis.nodal_dofs[0]
+    ex = basis.facet_dofs[0]
+    node_dofx = np.concatenate([vx, ex])
+    node_dofy = np.concatenate([basis.nodal_dofs[1], basis.facet_dofs[1]])
+    nodes = loc[:, node_dofx].T.copy()
+    nv = mesh.p.shape[1]
+    elem = np.hstack([mesh.t.T, nv + mesh.t2f.T])  # 4 corners + 4 edge midpoints
+
+    def full(q):
+        x = T @ q
+        return np.column_stack([x[node_dofx], x[node_dofy]])
+
+    def energies(q, v):
+        ue = basis.interpolate(T @ q)
+        ve = basis.interpolate(T @ v)
+        return kinetic_energy.elemental(basis, v=ve), strain_energy.elemental(basis, u=ue)
+
+    @Functional
+    def area(w):
+        return thickness + 0.0 * w.x[0]
+
+    vol = area.elemental(basis)
+    info = {"dofs": int(nred), "elements": int(mesh.t.shape[1]), "nodes": int(len(nodes)), "nx": nx,
+            "ny": int(mesh.t.shape[1] // nx), "full_dofs": int(N), "rigid_layers": bool(rigid_layers)}
+    model = SolidModel("plate", Mr, Kr, contacts, info, T, nodes, elem, energies, vol, full)
+    model.basis = basis
+    return model
