@@ -140,7 +140,7 @@ def plane_stress_forms(E, nu, rho, h):
 
     @Functional
     def kinetic_energy(w):
-        return 0.5 * h * rho * dot(w["v"], w["v"])
+        return 0.5 * h * rho * dot(w["vel"], w["vel"])
 
     return stiffness, mass, strain_energy, kinetic_energy
 
@@ -238,7 +238,7 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
     def energies(q, v):
         ue = basis.interpolate(T @ q)
         ve = basis.interpolate(T @ v)
-        return kinetic_energy.elemental(basis, v=ve), strain_energy.elemental(basis, u=ue)
+        return kinetic_energy.elemental(basis, vel=ve), strain_energy.elemental(basis, u=ue)
 
     @Functional
     def area(w):
