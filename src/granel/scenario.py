@@ -48,15 +48,16 @@ class SimulationSpec(_Strict):
     duration: float = 8e-4
     dt: float = 4e-8
     output_every: float = 1e-6
-    solver: Literal["paper", "fast"] = "paper"
+    solver: Literal["paper", "fast"] = "paper"  # coupled solver
     abstol: float = Field(1e-6, gt=0, description="absolute tolerance of eq. (A4) [N]")
     reltol: float = Field(1e-6, gt=0, description="relative tolerance of eq. (A4)")
     max_iterations: int = Field(50, ge=1)
     lambda_max: float = Field(0.5, gt=0, lt=1, description="B1: halve the step until max|lambda| <= this")
     max_halvings: int = Field(12, ge=0)
     checkpoint_every: float = 0.0
+    solid_output_every: float = Field(0.0, description="interval of stored solid states (0: output_every)")
 
-    @field_validator("duration", "dt", "output_every", "checkpoint_every", mode="before")
+    @field_validator("duration", "dt", "output_every", "checkpoint_every", "solid_output_every", mode="before")
     @classmethod
     def _parse(cls, v):
         return _time(v)
