@@ -48,7 +48,7 @@ class SimulationSpec(_Strict):
     duration: float = 8e-4
     dt: float = 4e-8
     output_every: float = 1e-6
-    solver: Literal["paper", "fast"] = "paper"  # coupled solver
+    solver: Literal["paper", "fast"] = "fast"  # coupled solver
     abstol: float = Field(1e-6, gt=0, description="absolute tolerance of eq. (A4) [N]")
     reltol: float = Field(1e-6, gt=0, description="relative tolerance of eq. (A4)")
     max_iterations: int = Field(50, ge=1)

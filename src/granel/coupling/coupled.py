@@ -178,8 +178,10 @@ class _GState:
 def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None) -> xr.Dataset:
     """Run a scenario with an elastic solid (plate or beam) by the paper's algorithm."""
     sim = sc.simulation
-    if sim.solver != "paper":
-        raise S.ScenarioError(f"simulation.solver = {sim.solver!r}: only 'paper' is available in this build")
+    if sim.solver == "fast":
+        from .fast import simulate_fast
+
+        return simulate_fast(sc, progress, checkpoint, resume)
     system, gstate0, media = S.build_granular(sc, sc.base)
     stepper = Stepper(system)
     model = build_solid(sc, system)
@@ -268,11 +270,11 @@ def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None
     return _dataset(sc, system, model, rec, steps, solid_rec, wall, prob)
 
 
-def _dataset(sc, system, model, rec, steps, solid_rec, wall, prob) -> xr.Dataset:
+def _dataset(sc, system, model, rec, steps, solid_rec, wall, prob, solver_name="paper", modes=None) -> xr.Dataset:
     sim = sc.simulation
     it = np.asarray(steps["iterations"], dtype=np.int64)
     dts = np.asarray(steps["dt"], float)
-    solver = {"name": "paper", "dt0": sim.dt, "steps": int(len(dts)), "mean_iterations": float(it.mean()) if len(it) else 0.0,
+    solver = {"name": solver_name, "dt0": sim.dt, "steps": int(len(dts)), "mean_iterations": float(it.mean()) if len(it) else 0.0,
               "max_iterations_used": int(it.max()) if len(it) else 0, "min_step": float(dts.min()) if len(dts) else sim.dt,
               "abstol": sim.abstol, "reltol": sim.reltol, "lambda_max": sim.lambda_max, "wall_time_s": wall,
               "neighbour_rebuilds": prob.stepper.rebuilds}
@@ -316,11 +318,19 @@ def _dataset(sc, system, model, rec, steps, solid_rec, wall, prob) -> xr.Dataset
     extras["step_dt"] = (("step",), dts, {"units": "s"})
     extras["step_iterations"] = (("step",), it, {})
     extras["step_lambda"] = (("step", "contact"), lam, {"long_name": "|lambda| (A9) of each step at each contact"})
+    nst = len(solid_rec["t"])
     extras["solid_time"] = (("solid_time",), np.asarray(solid_rec["t"], float), {"units": "s"})
-    extras["solid_x"] = (("solid_time", "dof"), np.array(solid_rec["x"], dtype=np.float32).reshape(len(solid_rec["t"]), -1),
-                         {"long_name": "reduced solid displacements q"})
-    extras["solid_v"] = (("solid_time", "dof"), np.array(solid_rec["v"], dtype=np.float32).reshape(len(solid_rec["t"]), -1),
-                         {"long_name": "reduced solid velocities"})
+    if "x" in solid_rec:  # reduced coordinates (paper solver)
+        extras["solid_x"] = (("solid_time", "dof"), np.array(solid_rec["x"], dtype=np.float32).reshape(nst, -1),
+                             {"long_name": "reduced solid displacements q"})
+        extras["solid_v"] = (("solid_time", "dof"), np.array(solid_rec["v"], dtype=np.float32).reshape(nst, -1),
+                             {"long_name": "reduced solid velocities"})
+    else:  # mass-normalised modal coordinates (fast solver): q = Phi eta
+        extras["solid_eta"] = (("solid_time", "mode"), np.array(solid_rec["eta"], dtype=np.float32).reshape(nst, -1),
+                               {"long_name": "modal displacements (mass-normalised modes)"})
+        extras["solid_eta_dot"] = (("solid_time", "mode"), np.array(solid_rec["eta_dot"], dtype=np.float32).reshape(nst, -1),
+                                   {"long_name": "modal velocities"})
+        extras["mode_omega"] = (("mode",), modes.omega, {"units": "rad/s"})
     for key, val in extras.items():
         r[f"extra:{key}"] = val
     ds = granular_dataset(rec.times, system.labels, system.media, system.medium_index, r, attrs)
