@@ -81,7 +81,8 @@ def build_beam(x0, y0, width, length, thickness, E, rho, contacts, n_elements=40
             pot[e] = 0.5 * xq[d] @ ke @ xq[d]
         return kin, pot
 
-    info = {"dofs": int(len(keep)), "elements": int(n_elements), "nodes": int(nn), "EI": E * I, "rhoA": rho * A}
+    info = {"dofs": int(len(keep)), "elements": int(n_elements), "nodes": int(nn), "EI": E * I, "rhoA": rho * A,
+            "width": width, "thickness": thickness}
     return SolidModel("beam", Mr, Kr, cps, info, T, nodes, elems, energies, np.full(n_elements, A * l), full)
 
 

@@ -1,0 +1,312 @@
+"""The paper's figures (3-11), each a function of result Datasets that writes PNG and PDF."""
+
+from __future__ import annotations
+
+import functools
+import tomllib
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import PatchCollection  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+
+from .analysis.modal import accumulated_modal_energy, modal_coordinates, modal_energies, time_averaged_accumulation  # noqa: E402
+from .analysis.reciprocity import directed_velocity, excitation_of, toward_solid  # noqa: E402
+
+plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
+
+SIDE_NAME = {"LSGM:3": "shock on LSGM granule 3", "SSGM:C": "shock on SSGM granule C"}
+
+
+def save_both(fig, path) -> list[Path]:
+    """Write `path` as PNG and PDF (same stem)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    outs = []
+    for ext in (".png", ".pdf"):
+        p = path.with_suffix(ext)
+        fig.savefig(p, bbox_inches="tight")
+        outs.append(p)
+    plt.close(fig)
+    return outs
+
+
+def scenario_of(ds) -> dict:
+    return tomllib.loads(ds.attrs["scenario"])
+
+
+@functools.lru_cache(maxsize=8)
+def _model_cached(scenario_toml: str):
+    from . import scenario as S
+    from .solid.build import build_solid
+
+    sc = S.validate(tomllib.loads(scenario_toml))
+    system, _, _ = S.build_granular(sc)
+    return sc, system, build_solid(sc, system)
+
+
+def model_of(ds):
+    """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
+    return _model_cached(ds.attrs["scenario"])
+
+
+def solid_state_at(ds, time: float, modes=None):
+    """The solid's reduced (q, v) at the stored solid time closest to `time`."""
+    k = int(np.argmin(np.abs(ds["solid_time"].values - time)))
+    if "solid_x" in ds:
+        return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float), k
+    if modes is None:
+        from .coupling.fast import all_modes
+
+        modes = all_modes(model_of(ds)[2])
+    return modes.shapes @ ds["solid_eta"].values[k].astype(float), modes.shapes @ ds["solid_eta_dot"].values[k].astype(float), k
+
+
+def fig3_velocities(fwd, bwd, out):
+    """Fig. 3: (a) the shock; (b) v_3C (granule 3 when C is shocked) and v_C3."""
+    A, dA = excitation_of(fwd)
+    B, dB = excitation_of(bwd)
+    sc = scenario_of(fwd)
+    e = sc["excitations"][0]
+    from .excitation import SHOCK_LEVELS
+
+    fmax = e.get("fmax", SHOCK_LEVELS.get(e.get("shock", ""), np.nan))
+    tau = e.get("tau", 1e-5)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.2), gridspec_kw={"width_ratios": [1, 2]})
+    tt = np.linspace(0, 2 * tau, 400)
+    ax1.plot(tt * 1e3, np.where(tt <= tau, fmax * np.sin(np.pi * tt / tau), 0.0), "k")
+    ax1.set_xlabel("time [ms]")
+    ax1.set_ylabel("F [N]")
+    ax1.set_title(f"(a) half-sine shock, Fmax = {fmax:g} N")
+    s_f = directed_velocity(fwd, B, dB)
+    s_b = directed_velocity(bwd, A, dA)
+    a_lab, b_lab = A.split(":")[1], B.split(":")[1]
+    ax2.plot(fwd["time"].values * 1e3, s_f, label=f"v_{b_lab}{a_lab}: granule {B} (shock on {A})")
+    ax2.plot(bwd["time"].values * 1e3, s_b, label=f"v_{a_lab}{b_lab}: granule {A} (shock on {B})")
+    ax2.set_xlabel("time [ms]")
+    ax2.set_ylabel("velocity toward the solid [m/s]")
+    ax2.set_title(f"(b) swapped excitation and measurement ({fwd.attrs.get('solid_kind', '')})")
+    ax2.legend(fontsize=8)
+    return save_both(fig, out)
+
+
+def _energy_curves(ds):
+    w = float(ds["input_work"].values.max())
+    t = ds["time"].values * 1e3
+    el, es, eso = (ds[k].values / w for k in ("energy_lsgm", "energy_ssgm", "energy_solid"))
+    d = (ds["dissipated_viscous"].values + ds["dissipated_friction"].values) / w
+    return t, {"LSGM": el, "SSGM": es, "solid": eso, "total": el + es + eso, "total + dissipated": el + es + eso + d}
+
+
+def fig4_energies(runs: dict, out):
+    """Fig. 4: normalised energies, rows weak / moderate / strong, columns LSGM / SSGM shock;
+    plate solid lines, beam dashed."""
+    fig, axes = plt.subplots(3, 2, figsize=(10, 10), sharex=True)
+    colors = {"LSGM": "C0", "SSGM": "C1", "solid": "C2", "total": "C3", "total + dissipated": "k"}
+    letters = iter("abcdef")
+    for r, shock in enumerate(("weak", "moderate", "strong")):
+        for c, exc in enumerate(("LSGM:3", "SSGM:C")):
+            ax = axes[r, c]
+            for solid, ls in (("plate", "-"), ("beam", "--")):
+                ds = runs.get((solid, exc, shock))
+                if ds is None:
+                    continue
+                t, curves = _energy_curves(ds)
+                for name, y in curves.items():
+                    ax.plot(t, 100 * y, ls, color=colors[name], lw=1.1, label=f"{name} ({solid})" if (r, c) == (0, 0) else None)
+            ax.set_title(f"({next(letters)}) {shock}, {SIDE_NAME[exc]}", fontsize=9)
+            ax.set_ylim(-2, 105)
+            if c == 0:
+                ax.set_ylabel("energy / input [%]")
+            if r == 2:
+                ax.set_xlabel("time [ms]")
+    axes[0, 0].legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    return save_both(fig, out)
+
+
+def granule_energies_at(ds, k: int, su=None):
+    """Per-granule energy (kinetic + rotational + contact share) at output index k."""
+    from .granular.system import GranularState, Stepper
+
+    sc, system, model = model_of(ds)
+    n = system.n
+    y = np.zeros(6 * n + 3)
+    y[0 : 2 * n : 2] = ds["x"].values[k]
+    y[1 : 2 * n : 2] = ds["y"].values[k]
+    y[2 * n : 3 * n] = ds["theta"].values[k]
+    y[3 * n : 5 * n : 2] = ds["v_x"].values[k]
+    y[3 * n + 1 : 5 * n : 2] = ds["v_y"].values[k]
+    y[5 * n : 6 * n] = ds["omega"].values[k]
+    st = Stepper(system)
+    from .granular.system import build_neighbours
+
+    st.nl = build_neighbours(system, y[: 2 * n].reshape(-1, 2))
+    kin, rot, pot = st.energies(GranularState(y, 0.0), su)
+    return kin + rot + pot, system
+
+
+def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=None):
+    """Granules and the solid coloured by the normalised energy density (14) at `time`."""
+    from .analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+    from .plots import draw_plate
+
+    sc, system, model = model_of(ds)
+    w0 = excited_reference(ds)
+    k = int(np.argmin(np.abs(ds["time"].values - time)))
+    q, v, _ = solid_state_at(ds, ds["time"].values[k], modes)
+    su = (model.contact_map() @ q).reshape(-1, 2)
+    e, _ = granule_energies_at(ds, k, su)
+    wg = e / (4 / 3 * np.pi * system.radius**3) / w0
+    norm = norm or LogNorm(1e-6, 1.0)
+    patches = [Circle((x, y), r) for x, y, r in zip(ds["x"].values[k], ds["y"].values[k], system.radius)]
+    pc = PatchCollection(patches, cmap=cmap, norm=norm, edgecolor="0.5", linewidth=0.3)
+    pc.set_array(np.clip(wg, norm.vmin, None))
+    ax.add_collection(pc)
+    if model.kind == "plate":
+        ws = solid_energy_density(model, q, v) / w0
+        draw_plate(ax, model, field=np.clip(ws, norm.vmin, None), cmap=cmap, color="none", lw=0)
+        ax.collections[-1].set_norm(norm)
+    else:
+        xs, ys, wb = beam_energy_density_grid(model, q, v)
+        ax.pcolormesh(np.linspace(xs[0], xs[-1], len(xs) + 1), ys, np.clip(wb / w0, norm.vmin, None), cmap=cmap, norm=norm, shading="flat")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xticks([])
+    ax.set_yticks([])
+    return pc
+
+
+def fig5_energy_density(runs: dict, out, t_left=2e-4, t_right=5e-5):
+    """Fig. 5: normalised energy density snapshots, strong shock: (a, b) left at 0.2 ms, plate and
+    beam; (c, d) right at 0.05 ms."""
+    fig, axes = plt.subplots(1, 4, figsize=(12, 4.2))
+    panels = [("plate", "LSGM:3", t_left, "a"), ("beam", "LSGM:3", t_left, "b"), ("plate", "SSGM:C", t_right, "c"), ("beam", "SSGM:C", t_right, "d")]
+    pc = None
+    for ax, (solid, exc, t, letter) in zip(axes, panels):
+        ds = runs.get((solid, exc, "strong"))
+        if ds is None:
+            ax.set_visible(False)
+            continue
+        pc = draw_energy_density(ax, ds, t)
+        ax.set_title(f"({letter}) {solid}, {exc}, t = {t * 1e3:.2f} ms", fontsize=8)
+    if pc is not None:
+        fig.colorbar(pc, ax=axes, shrink=0.8, label="normalised energy density w / w0")
+    return save_both(fig, out)
+
+
+def fig7_modal_accumulation(runs: dict, out, counts=(6, 100, 1000), modes=None):
+    """Fig. 7: accumulated modal energy of the leading 6, 100, 1000 plate modes vs time, strong."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    for ax, exc, letter in zip(axes, ("LSGM:3", "SSGM:C"), "ab"):
+        ds = runs.get(("plate", exc, "strong"))
+        if ds is None:
+            continue
+        t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
+        E = modal_energies(X, Xd, w)
+        win = float(ds["input_work"].values.max())
+        ax.plot(t * 1e3, 100 * E.sum(axis=1) / win, "k", lw=1.5, label="total")
+        for n, y in accumulated_modal_energy(E, counts).items():
+            ax.plot(t * 1e3, 100 * y / win, label=f"{n} modes")
+        ax.set_title(f"({letter}) plate, strong, {SIDE_NAME[exc]}", fontsize=9)
+        ax.set_xlabel("time [ms]")
+        ax.set_ylabel("energy / input [%]")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return save_both(fig, out)
+
+
+def fig8_solid_partition(runs: dict, out):
+    """Fig. 8: kinetic, potential and total energy of the plate, strong shock, both sides."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    for ax, exc, letter in zip(axes, ("LSGM:3", "SSGM:C"), "ab"):
+        ds = runs.get(("plate", exc, "strong"))
+        if ds is None:
+            continue
+        w = float(ds["input_work"].values.max())
+        t = ds["time"].values * 1e3
+        ax.plot(t, 100 * ds["energy_solid"].values / w, "k", label="total")
+        ax.plot(t, 100 * ds["energy_solid_potential"].values / w, "C0", label="potential (elastic)")
+        ax.plot(t, 100 * ds["energy_solid_kinetic"].values / w, "C3", label="kinetic")
+        ax.set_title(f"({letter}) plate, strong, {SIDE_NAME[exc]}", fontsize=9)
+        ax.set_xlabel("time [ms]")
+        ax.set_ylabel("energy / input [%]")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return save_both(fig, out)
+
+
+def time_averaged(ds, modes=None):
+    t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
+    return time_averaged_accumulation(modal_energies(X, Xd, w), t)
+
+
+def fig9_time_averaged(runs: dict, out, nmax=1000):
+    """Fig. 9: time-averaged accumulated modal energy (16) vs N, 12 cases."""
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.5), sharey=True)
+    for ax, shock, letter in zip(axes, ("weak", "moderate", "strong"), "abc"):
+        for solid, ls in (("plate", "-"), ("beam", "--")):
+            for exc, color in (("LSGM:3", "C0"), ("SSGM:C", "C3")):
+                ds = runs.get((solid, exc, shock))
+                if ds is None:
+                    continue
+                acc = time_averaged(ds)[:nmax]
+                ax.semilogx(np.arange(1, len(acc) + 1), acc, ls, color=color, label=f"{solid}, {exc}")
+        ax.set_title(f"({letter}) {shock}", fontsize=9)
+        ax.set_xlabel("number of modes N")
+        ax.set_ylim(0, 1.02)
+    axes[0].set_ylabel("time-averaged energy fraction, eq. (16)")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    return save_both(fig, out)
+
+
+def fig10_friction_law(out, mu=0.099, k_s=100.0, N=1.0):
+    """Fig. 10: the tanh-Coulomb law (5) and discontinuous Coulomb friction."""
+    v = np.linspace(-0.1, 0.1, 801)
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3), sharey=True)
+    axes[0].plot(v, -mu * N * np.tanh(k_s * v))
+    axes[0].set_title(f"(a) tanh-Coulomb, k_s = {k_s:g} s/m", fontsize=9)
+    axes[1].plot(v, -mu * N * np.sign(v))
+    axes[1].set_title("(b) Coulomb", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("relative tangential velocity [m/s]")
+    axes[0].set_ylabel("f / |N|")
+    fig.tight_layout()
+    return save_both(fig, out)
+
+
+def b1_adapted(lam, limit=0.5):
+    """The paper's (B1): lambda(dt0) / 2^n with the smallest n giving <= limit."""
+    lam = np.asarray(lam, float)
+    n = np.maximum(0, np.ceil(np.log2(np.maximum(lam, 1e-300) / limit)))
+    return lam / 2**n
+
+
+def fig11_eigenvalues(ds, out, tmax=2e-4, left=("LSGM:10", "LSGM:11", "LSGM:12"), right=("SSGM:J", "SSGM:K", "SSGM:L")):
+    """Fig. 11: |lambda| (A9) at the six tracked contacts, strong shock on C, plate. From a
+    paper-solver run these are the adapted values it used; from a fast-solver run, lambda at dt0
+    reduced by (B1) as the paper's algorithm would have."""
+    t = ds["step_time"].values
+    lam = ds["step_lambda"].values
+    names = list(ds["contact"].values)
+    sel = t <= tmax
+    adapted = ds.attrs.get("solver_name") != "paper"
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharey=True)
+    for ax, group, letter, side in zip(axes, (left, right), "ab", ("left", "right")):
+        for name in group:
+            if name not in names:
+                continue
+            y = lam[sel, names.index(name)]
+            ax.plot(t[sel] * 1e3, b1_adapted(y) if adapted else y, lw=0.6, label=f"lambda_{name.split(':')[1]}")
+        ax.set_title(f"({letter}) contacts on the {side} edge", fontsize=9)
+        ax.set_xlabel("time [ms]")
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("|lambda|")
+    fig.tight_layout()
+    return save_both(fig, out)
