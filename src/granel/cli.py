@@ -210,3 +210,132 @@ def modes(
     for k in range(n):
         t.add_row(str(k + 1), f"{md.periods[k] * 1e3:.5f}", f"{1 / md.periods[k] / 1e3:.3f}", kinds[k])
     Console().print(t)
+
+
+@app.command()
+def paper(
+    out: Path = typer.Option(Path("paper-out"), "--out", help="output directory"),
+    solver: str = typer.Option("fast", help="fast | paper (the reference algorithm: hours for the strong plate cases)"),
+    animations: bool = typer.Option(True, "--animations/--no-animations", help="movies of the strong cases"),
+    reuse: bool = typer.Option(True, "--reuse/--rerun", help="reuse cached, validated results in OUT/runs"),
+):
+    """Regenerate the paper: twelve cases, modal analysis, every figure, animations, report.md."""
+    from .report import CASES, paper_study
+
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("paper cases", total=len(CASES))
+
+        def progress(what, info):
+            if isinstance(what, tuple):
+                bar.update(task, advance=1, description=f"{'-'.join(what)} ({info if isinstance(info, str) else f'{info:.1f} s'})")
+            else:
+                bar.update(task, description=str(what))
+
+        try:
+            res = paper_study(out, solver, reuse, animations, progress)
+        except S.ScenarioError as e:
+            _fail(str(e))
+    t = Table("claim", "paper", "granel", "verdict", title="granel vs the paper", show_lines=False)
+    for c in res["claims"]:
+        color = "green" if c["verdict"] == "agree" else "yellow"
+        t.add_row(c["claim"], c["paper"], c["granel"], f"[{color}]{c['verdict']}[/]")
+    Console().print(t)
+    agree = sum(c["verdict"] == "agree" for c in res["claims"])
+    console.print(f"{agree}/{len(res['claims'])} claims agree; report: {res['report']}; total {res['total_s']:.1f} s")
+
+
+@app.command()
+def reciprocity(
+    scenario: str = typer.Argument("paper", help="built-in name or TOML file"),
+    shock: Optional[str] = typer.Option("strong", help="weak | moderate | strong"),
+    fmax: Optional[float] = typer.Option(None, help="peak force instead of a named shock [N]"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
+    a: str = typer.Option("LSGM:3", "--a", help="first excitation/measurement granule"),
+    b: str = typer.Option("SSGM:C", "--b", help="second excitation/measurement granule"),
+    duration: Optional[str] = typer.Option(None, help="simulated time, e.g. 0.8ms"),
+    out: Path = typer.Option(Path("reciprocity"), "--out", help="directory for the two runs and the Fig. 3 plot"),
+    set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
+    json_out: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+):
+    """Run both directions (shock at A measured at B, and the reverse) and compare."""
+    from .analysis.reciprocity import reciprocity_metrics
+    from .figures import fig3_velocities
+    from .results import write_netcdf
+    from .run import run_scenario
+
+    if shock and fmax is not None:
+        shock = None
+    runs = {}
+    for exc in (b, a):
+        ov = _overrides(solid, exc, shock, fmax, duration, None, None, None, set_)
+        try:
+            sc = load_scenario(scenario, ov)
+        except S.ScenarioError as e:
+            _fail(str(e))
+        with console.status(f"running with the shock on {exc}"):
+            ds = run_scenario(sc)
+        write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
+        runs[exc] = ds
+    m = reciprocity_metrics(runs[b], runs[a])
+    fig3_velocities(runs[b], runs[a], out / "fig3_velocities")
+    if json_out:
+        print(json.dumps(m, indent=2, default=float))
+        return
+    t = Table("metric", f"shock on {b}, measured at {a}", f"shock on {a}, measured at {b}", title="reciprocity")
+    f, k = m["forward"], m["backward"]
+    t.add_row("arrival at the measured granule [ms]", f"{f['arrival_measured_s'] * 1e3:.4f}", f"{k['arrival_measured_s'] * 1e3:.4f}")
+    t.add_row("arrival at the solid [ms]", f"{f['arrival_solid_s'] * 1e3:.4f}", f"{k['arrival_solid_s'] * 1e3:.4f}")
+    t.add_row("peak velocity toward the solid [m/s]", f"{f['peak_velocity_m_s']:.4f}", f"{k['peak_velocity_m_s']:.4f}")
+    t.add_row("far-medium energy, peak [% input]", f"{100 * f['energy_far_peak_frac']:.2f}", f"{100 * k['energy_far_peak_frac']:.2f}")
+    t.add_row("solid energy, peak [% input]", f"{100 * f['solid_energy_peak_frac']:.2f}", f"{100 * k['solid_energy_peak_frac']:.2f}")
+    t.add_row("solid spectral centroid [kHz]", f"{f['spectral_centroid_hz'] / 1e3:.2f}", f"{k['spectral_centroid_hz'] / 1e3:.2f}")
+    Console().print(t)
+    console.print(f"nonreciprocity index: {m['nonreciprocity_index']:.4f} (0 = reciprocal); faster: {m['faster_direction']}; "
+                  f"figure: {out / 'fig3_velocities.png'}")
+
+
+@app.command()
+def animate(
+    result: Path = typer.Argument(..., help="a result NetCDF file"),
+    output: Path = typer.Option(Path("movie.mp4"), "-o", "--output", help=".mp4 (GIF fallback) or .gif"),
+    field: str = typer.Option("deformation", help="deformation | energy-density"),
+    magnification: Optional[float] = typer.Option(None, help="deformation scale (default: x5000 weak, x1000 moderate, x200 strong)"),
+    frames: int = typer.Option(120, help="number of frames"),
+    fps: int = typer.Option(20, help="frames per second"),
+):
+    """Render a movie of a run (Appendix C)."""
+    from .animate import animate as _animate
+    from .results import read_netcdf
+
+    if not result.exists():
+        _fail(f"{result}: no such file")
+    if field not in ("deformation", "energy-density"):
+        _fail(f"--field {field!r}: choose deformation or energy-density")
+    with console.status("rendering"):
+        path = _animate(read_netcdf(result), output, field, magnification, frames, fps)
+    console.print(f"wrote {path}")
+
+
+@app.command()
+def bench(
+    quick: bool = typer.Option(False, "--quick", help="short runs (0.1 ms), no `granel paper` timing"),
+    json_out: bool = typer.Option(False, "--json", help="print one JSON object"),
+    cases: Optional[str] = typer.Option(None, help="comma list of case tags, e.g. plate-SSGMC-strong"),
+    duration: Optional[str] = typer.Option(None, help="simulated time per case (default 0.8 ms, 0.1 ms with --quick)"),
+):
+    """Paper solver vs fast solver, side by side in one process: wall times, ratio, accuracy."""
+    from .benchmark import run_bench
+
+    res = run_bench(quick=quick, only=cases.split(",") if cases else None, duration=duration,
+                    log=lambda s: console.print(s))
+    if json_out:
+        print(json.dumps(res, indent=2))
+        return
+    t = Table("case", "paper [s]", "fast [s]", "ratio", "energy dev [% input]", "velocity rel L2", title="granel bench")
+    for c in res["cases"]:
+        t.add_row(f"{c['solid']}-{c['excite']}-{c['shock']}", f"{c['paper_s']:.2f}", f"{c['fast_s']:.3f}", f"{c['ratio']:.1f}",
+                  f"{c['energy_dev_pct']:.4f}", f"{c['velocity_rel_l2']:.2e}")
+    Console().print(t)
+    if res.get("paper_total_s") is not None:
+        console.print(f"granel paper (no animations): {res['paper_total_s']:.1f} s")

@@ -93,8 +93,8 @@ def contact_forces_jacobian(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, u, w):
         if delta <= 0.0:
             continue
         dd = rvx * nx + rvy * ny
-        d25 = delta**0.25
-        fn = sA[c] * delta**1.5 + sG[c] * d25 * dd
+        d25 = math.sqrt(math.sqrt(delta))
+        fn = sA[c] * delta * math.sqrt(delta) + sG[c] * d25 * dd
         th = math.tanh(k_s * vt)
         ft = -mu * abs(fn) * th
         F[c, 0] = fn * nx - ft * tx
@@ -119,6 +119,15 @@ def contact_forces_jacobian(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, u, w):
     return F, normal, vrel, Du, Dw
 
 
+@njit(cache=True, fastmath=True)
+def _matvec(A, x, out):
+    for r in range(A.shape[0]):
+        acc = 0.0
+        for i in range(A.shape[1]):
+            acc += A[r, i] * x[i]
+        out[r] = acc
+
+
 @njit(cache=True)
 def fast_advance(
     y, t, dt, nsteps, n, ref_pos, max_disp,
@@ -130,69 +139,74 @@ def fast_advance(
     out_iters, out_lam, out_normal, out_vrel,
 ):
     """Advance the coupled system by up to nsteps steps of size dt. Returns (steps done, status):
-    status 0 ok, 1 neighbour list must be rebuilt, 2 no convergence, 3 non-finite state."""
+    status 0 ok, 1 neighbour list must be rebuilt, 2 no convergence, 3 non-finite state.
+
+    Per step the modal work is two (2nc x nmodes) products: Q z for the Newmark predictor at the
+    contacts (Q = -P D W^2, z = eta + eta' dt + eta'' dt^2 / 4) and P' F for the accepted
+    accelerations; the contact motion itself is advanced with the same (A2)-(A3) algebra."""
     nm = w2.shape[0]
     nc = sg.shape[0]
     m2 = 2 * nc
     D = np.empty(nm)
     for i in range(nm):
         D[i] = 1.0 / (1.0 + 0.25 * w2[i] * dt * dt)
-    # C = P D P'
     C = np.zeros((m2, m2))
     for a in range(m2):
         for b in range(a, m2):
-            s = 0.0
+            acc = 0.0
             for i in range(nm):
-                s += P[a, i] * D[i] * P[b, i]
-            C[a, b] = s
-            C[b, a] = s
-    ap = np.empty(nm)
+                acc += P[a, i] * D[i] * P[b, i]
+            C[a, b] = acc
+            C[b, a] = acc
+    Q = np.empty((m2, nm))
+    for a in range(m2):
+        for i in range(nm):
+            Q[a, i] = -P[a, i] * D[i] * w2[i]
+    Pt = np.ascontiguousarray(P.T)
+    z = np.empty(nm)
+    g = np.empty(nm)
     ytr = np.empty_like(y)
+    # contact motion at the current state: u = P eta, v = P eta', a = P eta''
+    u0f = np.empty(m2)
+    v0f = np.empty(m2)
+    a0f = np.empty(m2)
+    _matvec(P, eta, u0f)
+    _matvec(P, etad, v0f)
+    _matvec(P, etaa, a0f)
+    bapf = np.empty(m2)
     u0 = np.zeros((nc, 2))
     v0 = np.zeros((nc, 2))
-    a0 = np.zeros((nc, 2))
-    bap = np.zeros((nc, 2))
     abar = np.zeros((nc, 2))
     u1 = np.zeros((nc, 2))
     v1 = np.zeros((nc, 2))
+    a1f = np.empty(m2)
     Jm = np.zeros((m2, m2))
+    rhs = np.empty(m2)
     lim2 = max_disp * max_disp
     for s in range(nsteps):
-        # modal Newmark predictor and the contact motion at the step start
         for i in range(nm):
-            ap[i] = -w2[i] * (eta[i] + etad[i] * dt + 0.25 * dt * dt * etaa[i]) * D[i]
+            z[i] = eta[i] + etad[i] * dt + 0.25 * dt * dt * etaa[i]
+        bapf[:] = np.dot(Q, z)
         for c in range(nc):
             for d in range(2):
-                r = 2 * c + d
-                su = 0.0
-                sv = 0.0
-                sa = 0.0
-                sb = 0.0
-                for i in range(nm):
-                    p = P[r, i]
-                    su += p * eta[i]
-                    sv += p * etad[i]
-                    sa += p * etaa[i]
-                    sb += p * ap[i]
-                u0[c, d] = su
-                v0[c, d] = sv
-                a0[c, d] = sa
-                bap[c, d] = sb
+                u0[c, d] = u0f[2 * c + d]
+                v0[c, d] = v0f[2 * c + d]
         converged = False
         it = 0
         normal = np.zeros(nc)
         vrel = np.zeros(nc)
         while it < max_iter:
             it += 1
-            for c in range(nc):
-                for d in range(2):
-                    r = 2 * c + d
-                    acc = bap[c, d]
-                    for q in range(m2):
-                        acc += C[r, q] * F[q // 2, q % 2]
-                    abar[c, d] = 0.5 * (a0[c, d] + acc)
-                    u1[c, d] = u0[c, d] + v0[c, d] * dt + 0.5 * abar[c, d] * dt * dt
-                    v1[c, d] = v0[c, d] + abar[c, d] * dt
+            for r in range(m2):
+                acc = bapf[r]
+                for q in range(m2):
+                    acc += C[r, q] * F[q // 2, q % 2]
+                a1f[r] = acc
+                c = r // 2
+                d = r % 2
+                abar[c, d] = 0.5 * (a0f[r] + acc)
+                u1[c, d] = u0f[r] + v0f[r] * dt + 0.5 * abar[c, d] * dt * dt
+                v1[c, d] = v0f[r] + abar[c, d] * dt
             ytr[:] = y
             kernels.rk4_advance(ytr, t, dt, 1, n, ref_pos, 1e300, radius, mass, inertia, mu, k_s,
                                 pi_, pj_, pA, pG, wg, ww, wA, wG, wall_p0, wall_dir, wall_len, wall_n,
@@ -217,7 +231,6 @@ def fast_advance(
                     Jm[r, q] = -(Du[c, d, 0] * C[2 * c, q] + Du[c, d, 1] * C[2 * c + 1, q]) * 0.25 * dt * dt \
                         - (Dw[c, d, 0] * C[2 * c, q] + Dw[c, d, 1] * C[2 * c + 1, q]) * 0.5 * dt
                 Jm[r, r] += 1.0
-            rhs = np.empty(m2)
             for c in range(nc):
                 rhs[2 * c] = G[c, 0] - F[c, 0]
                 rhs[2 * c + 1] = G[c, 1] - F[c, 1]
@@ -228,15 +241,24 @@ def fast_advance(
         if not converged:
             return s, 2
         # accept: modal Newmark with the converged forces
+        for r in range(m2):
+            rhs[r] = F[r // 2, r % 2]
+        g[:] = np.dot(Pt, rhs)
         for i in range(nm):
-            g = 0.0
-            for r in range(m2):
-                g += P[r, i] * F[r // 2, r % 2]
-            an = ap[i] + D[i] * g
+            an = -w2[i] * D[i] * z[i] + D[i] * g[i]
             aa = 0.5 * (etaa[i] + an)
             eta[i] += etad[i] * dt + 0.5 * aa * dt * dt
             etad[i] += aa * dt
             etaa[i] = an
+        # the contact motion follows by the same algebra (B applied to the modal update)
+        for r in range(m2):
+            acc = bapf[r]
+            for q in range(m2):
+                acc += C[r, q] * rhs[q]
+            ab = 0.5 * (a0f[r] + acc)
+            u0f[r] += v0f[r] * dt + 0.5 * ab * dt * dt
+            v0f[r] += ab * dt
+            a0f[r] = acc
         finite = True
         for k in range(y.shape[0]):
             y[k] = ytr[k]

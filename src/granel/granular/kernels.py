@@ -98,8 +98,8 @@ def rhs(
         rvy = y[V + 2 * i + 1] - y[V + 2 * j + 1]
         ddelta = rvx * nx + rvy * ny
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i] + radius[j] * y[OM + j]
-        gam = pG[c] * delta**0.25
-        fn = pA[c] * delta**1.5 + gam * ddelta
+        gam = pG[c] * math.sqrt(math.sqrt(delta))
+        fn = pA[c] * delta * math.sqrt(delta) + gam * ddelta
         ft = -mu * abs(fn) * math.tanh(k_s * vt)
         fx = -fn * nx + ft * tx
         fy = -fn * ny + ft * ty
@@ -132,8 +132,8 @@ def rhs(
         rvy = y[V + 2 * i + 1]
         ddelta = rvx * nx + rvy * ny
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
-        gam = wG[c] * delta**0.25
-        fn = wA[c] * delta**1.5 + gam * ddelta
+        gam = wG[c] * math.sqrt(math.sqrt(delta))
+        fn = wA[c] * delta * math.sqrt(delta) + gam * ddelta
         ft = -mu * abs(fn) * math.tanh(k_s * vt)
         dy[V + 2 * i] += -fn * nx + ft * tx
         dy[V + 2 * i + 1] += -fn * ny + ft * ty
@@ -159,8 +159,8 @@ def rhs(
         rvy = y[V + 2 * i + 1] - wy
         ddelta = rvx * nx + rvy * ny
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
-        gam = sG[c] * delta**0.25
-        fn = sA[c] * delta**1.5 + gam * ddelta
+        gam = sG[c] * math.sqrt(math.sqrt(delta))
+        fn = sA[c] * delta * math.sqrt(delta) + gam * ddelta
         ft = -mu * abs(fn) * math.tanh(k_s * vt)
         dy[V + 2 * i] += -fn * nx + ft * tx
         dy[V + 2 * i + 1] += -fn * ny + ft * ty
@@ -279,7 +279,7 @@ def solid_contact_state(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, su, sv):
         if delta <= 0.0:
             continue
         ddelta = rvx * nx + rvy * ny
-        fn = sA[c] * delta**1.5 + sG[c] * delta**0.25 * ddelta
+        fn = sA[c] * delta * math.sqrt(delta) + sG[c] * math.sqrt(math.sqrt(delta)) * ddelta
         ft = -mu * abs(fn) * math.tanh(k_s * vt)
         force[c, 0] = fn * nx - ft * tx
         force[c, 1] = fn * ny - ft * ty
@@ -311,7 +311,7 @@ def granule_energies(
         dyy = y[P + 2 * j + 1] - y[P + 2 * i + 1]
         delta = radius[i] + radius[j] - math.sqrt(dx * dx + dyy * dyy)
         if delta > 0.0:
-            e = 0.2 * pA[c] * delta**2.5
+            e = 0.2 * pA[c] * delta * delta * math.sqrt(delta)
             pot[i] += e
             pot[j] += e
     for c in range(wg.shape[0]):
@@ -324,11 +324,11 @@ def granule_energies(
             continue
         delta = radius[i] - (rx * wall_n[w, 0] + ry * wall_n[w, 1])
         if delta > 0.0:
-            pot[i] += 0.4 * wA[c] * delta**2.5
+            pot[i] += 0.4 * wA[c] * delta * delta * math.sqrt(delta)
     for c in range(sg.shape[0]):
         i = sg[c]
         gap = (sp[c, 0] + su[c, 0] - y[P + 2 * i]) * sn[c, 0] + (sp[c, 1] + su[c, 1] - y[P + 2 * i + 1]) * sn[c, 1]
         delta = radius[i] - gap
         if delta > 0.0:
-            pot[i] += 0.4 * sA[c] * delta**2.5
+            pot[i] += 0.4 * sA[c] * delta * delta * math.sqrt(delta)
     return kin, rot, pot
