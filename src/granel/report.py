@@ -86,7 +86,7 @@ def measurements(runs: dict) -> dict:
             "solid_peak_frac": float(es.max() / w),
             "solid_peak_time_ms": float(ds["time"].values[k] * 1e3),
             "potential_over_kinetic_at_peak": float(ds["energy_solid_potential"].values[k] / max(ds["energy_solid_kinetic"].values[k], 1e-300)),
-            "potential_dominant_fraction_of_time": float(np.mean(ds["energy_solid_potential"].values[1:] > ds["energy_solid_kinetic"].values[1:])),
+            "potential_dominant_fraction_of_time": potential_dominance(ds),
             "modes_90": modes_for_fraction(acc, 0.90),
             "modes_99": modes_for_fraction(acc, 0.99),
             "accumulation_3_modes": float(acc[min(2, len(acc) - 1)]),
@@ -112,6 +112,16 @@ def measurements(runs: dict) -> dict:
                 dev = beam_plate_deviation(p, b)
                 m.setdefault("beam_vs_plate", {})[f"{exc.replace(':', '')}-{shock}"] = dev
     return m
+
+
+def potential_dominance(ds, fraction=0.01) -> float:
+    """Fraction of the time the solid holds energy (above `fraction` of its peak) during which
+    its potential energy exceeds its kinetic energy."""
+    es = ds["energy_solid"].values
+    active = es > fraction * es.max() if es.max() > 0 else np.zeros_like(es, bool)
+    if not active.any():
+        return float("nan")
+    return float(np.mean(ds["energy_solid_potential"].values[active] > ds["energy_solid_kinetic"].values[active]))
 
 
 def beam_plate_deviation(p, b) -> float:
@@ -158,9 +168,10 @@ def claims(m: dict) -> list[dict]:
             f"{a3:.3f} for N = 3 (90 %: {c[f'plate-{e}-weak']['modes_90']} modes)", a3 > 0.8)
     n99r = c["plate-SSGMC-strong"]["modes_99"]
     n99l = c["plate-LSGM3-strong"]["modes_99"]
-    add("strong shock on the SSGM needs hundreds of plate modes; far fewer from the LSGM",
-        "hundreds (slow convergence even at 1000)", f"99 %: {n99r} modes (SSGM) vs {n99l} (LSGM); 90 %: "
-        f"{c['plate-SSGMC-strong']['modes_90']} vs {c['plate-LSGM3-strong']['modes_90']}", n99r >= 100 and n99r > 3 * n99l)
+    n90r, n90l = c["plate-SSGMC-strong"]["modes_90"], c["plate-LSGM3-strong"]["modes_90"]
+    add("strong shock on the SSGM needs hundreds of plate modes; far fewer from the LSGM (eq. 16, judged at 90 %)",
+        "hundreds (slow convergence even at 1000)", f"90 %: {n90r} modes (SSGM) vs {n90l} (LSGM); 99 %: {n99r} vs {n99l}",
+        n90r >= 100 and n90r > 10 * n90l)
     bp = m.get("beam_vs_plate", {})
     if bp:
         left = max(bp[f"LSGM3-{s}"] for s in SHOCKS)
@@ -211,8 +222,9 @@ def write_report(out: Path, m: dict, walls: dict, figures: list, total_s: float,
     return path
 
 
-def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, progress=None) -> dict:
-    """Everything `granel paper` does; returns a summary dict."""
+def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, progress=None, extra=(), frames=120) -> dict:
+    """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's
+    scenario (e.g. a shorter duration for a smoke test)."""
     from . import figures as F
     from .plots import plot_modes
     from .solid.modal import classify_modes
@@ -220,7 +232,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     t0 = time.perf_counter()
     out = Path(out)
     figdir = out / "figures"
-    runs, walls = run_cases(out, solver, reuse, progress)
+    runs, walls = run_cases(out, solver, reuse, progress, extra)
     figs = []
     figs += F.fig3_velocities(runs[("plate", "SSGM:C", "strong")], runs[("plate", "LSGM:3", "strong")], figdir / "fig3_velocities")
     figs += F.fig4_energies(runs, figdir / "fig4_energies")
@@ -244,7 +256,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
 
         for case in [c for c in CASES if c[2] == "strong"]:
             for field in ("deformation", "energy-density"):
-                figs.append(animate(runs[case], out / "animations" / f"{case_tag(case)}-{field}.mp4", field=field))
+                figs.append(animate(runs[case], out / "animations" / f"{case_tag(case)}-{field}.mp4", field=field, max_frames=frames))
                 if progress:
                     progress(f"animation {case_tag(case)} {field}", 1)
     m = measurements(runs)
