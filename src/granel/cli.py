@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -339,3 +340,62 @@ def bench(
     Console().print(t)
     if res.get("paper_total_s") is not None:
         console.print(f"granel paper (no animations): {res['paper_total_s']:.1f} s")
+
+
+@app.command()
+def sweep(
+    sweep_file: Path = typer.Argument(..., help="sweep TOML (see docs/sweeps.md)"),
+    out: Path = typer.Option(Path("sweep-out"), "-o", "--out", help="output directory"),
+    workers: int = typer.Option(2, help="LocalCluster worker processes (ignored with --scheduler)"),
+    scheduler: Optional[str] = typer.Option(None, help="address of a running dask scheduler, e.g. tcp://host:8786"),
+):
+    """Run a parameter sweep on dask.distributed; re-running skips finished cases."""
+    from .sweep import cases, load_sweep, run_sweep
+
+    try:
+        spec, _ = load_sweep(sweep_file)
+    except S.ScenarioError as e:
+        _fail(str(e))
+    n = len(cases(spec))
+    failed = []
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+        task = bar.add_task(f"sweep {spec.name}", total=n)
+
+        def progress(r):
+            if r.get("status") != "ok":
+                failed.append(r)
+            bar.update(task, advance=1)
+
+        ds = run_sweep(sweep_file, out, workers, scheduler, progress)
+    metrics = [v for v in ds.data_vars if v != "status"]
+    t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok")
+    for m in metrics:
+        v = ds[m].values
+        if np.isfinite(v).any():
+            t.add_row(m, f"{np.nanmin(v):.4g}", f"{np.nanmedian(v):.4g}", f"{np.nanmax(v):.4g}")
+    Console().print(t)
+    for r in failed:
+        console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
+    console.print(f"summary: {out / 'summary.nc'}")
+
+
+@app.command("map")
+def map_(
+    summary: Path = typer.Argument(..., help="a sweep's summary.nc"),
+    output: Path = typer.Option(Path("map.png"), "-o", "--output"),
+    metric: str = typer.Option("nonreciprocity_index", help="variable to draw"),
+    x: Optional[str] = typer.Option(None, help="axis along x (default: the first)"),
+    y: Optional[str] = typer.Option(None, help="axis along y (default: the second)"),
+):
+    """Draw a design map: a metric over two sweep axes (panels over a third)."""
+    from .results import read_netcdf
+    from .sweep import plot_map
+
+    if not summary.exists():
+        _fail(f"{summary}: no such file")
+    try:
+        plot_map(read_netcdf(summary), output, metric, x, y)
+    except ValueError as e:
+        _fail(str(e))
+    console.print(f"wrote {output}")

@@ -1,0 +1,345 @@
+"""Parameter sweeps over any scenario field, run on dask.distributed (a LocalCluster by
+default, or an existing scheduler), with one NetCDF per run, resume, and a summary Dataset.
+
+A sweep file (TOML):
+
+    name = "nonreciprocity"
+    base = "paper"                       # built-in scenario name or a path
+    overrides = ['simulation.duration="0.8ms"']
+    mode = "reciprocity"                 # each case runs both directions (pair) | "run": one run
+    pair = ["LSGM:3", "SSGM:C"]
+
+    [[axes]]                             # one field, values by list, linspace or logspace
+    field = "excitations.0.fmax"
+    logspace = [63.67, 7958.0, 10]
+    [[axes]]
+    field = "solid.kind"
+    values = ["plate", "beam"]
+    [[axes]]                             # zipped fields that vary together: one dimension
+    name = "load"
+    zip = { "excitations.0.kind" = ["half_sine", "burst"], "excitations.0.frequency" = [1.0, 2e4] }
+
+Cases are the Cartesian product of the axes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import tomllib
+import traceback
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import xarray as xr
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from . import scenario as S
+
+
+class AxisSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    field: str | None = None
+    name: str | None = None
+    values: list[Any] | None = None
+    linspace: tuple[float, float, int] | None = None
+    logspace: tuple[float, float, int] | None = None
+    zip: dict[str, list[Any]] | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self):
+        kinds = [k for k in ("values", "linspace", "logspace", "zip") if getattr(self, k) is not None]
+        if len(kinds) != 1:
+            raise ValueError(f"an axis needs exactly one of values, linspace, logspace, zip (got {kinds or 'none'})")
+        if self.zip is None and not self.field:
+            raise ValueError("an axis needs 'field' (or 'zip' with 'name')")
+        if self.zip is not None:
+            if not self.name:
+                raise ValueError("a zipped axis needs a 'name'")
+            lens = {len(v) for v in self.zip.values()}
+            if len(lens) != 1 or 0 in lens:
+                raise ValueError(f"zipped lists must be non-empty and of equal length, got {sorted(lens)}")
+        for k in ("linspace", "logspace"):
+            v = getattr(self, k)
+            if v is not None and v[2] < 1:
+                raise ValueError(f"{k} needs a positive count, got {v[2]}")
+            if k == "logspace" and v is not None and (v[0] <= 0 or v[1] <= 0):
+                raise ValueError("logspace bounds must be positive")
+        return self
+
+    @property
+    def dim(self) -> str:
+        return self.name or self.field.replace(".", "_")
+
+    def points(self) -> list[dict[str, Any]]:
+        """The overrides of each point of this axis: [{field: value, ...}, ...]."""
+        if self.zip is not None:
+            n = len(next(iter(self.zip.values())))
+            return [{f: vals[i] for f, vals in self.zip.items()} for i in range(n)]
+        if self.values is not None:
+            vals = self.values
+        elif self.linspace is not None:
+            vals = list(np.linspace(*self.linspace[:2], int(self.linspace[2])))
+        else:
+            a, b, n = self.logspace
+            vals = list(np.geomspace(a, b, int(n)))
+        return [{self.field: (float(v) if isinstance(v, (np.floating, float)) else v)} for v in vals]
+
+    def coordinate(self):
+        if self.zip is not None:
+            return np.arange(len(next(iter(self.zip.values()))))
+        return np.array([list(p.values())[0] for p in self.points()])
+
+
+class SweepSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str = "sweep"
+    description: str = ""
+    base: str = "paper"
+    overrides: list[str] = Field(default_factory=list)
+    mode: Literal["reciprocity", "run"] = "reciprocity"
+    pair: tuple[str, str] = ("LSGM:3", "SSGM:C")
+    axes: list[AxisSpec] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _dims(self):
+        dims = [a.dim for a in self.axes]
+        if len(set(dims)) != len(dims):
+            raise ValueError(f"axis names must be unique, got {dims}")
+        return self
+
+
+def load_sweep(path) -> tuple[SweepSpec, Path]:
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise S.ScenarioError(f"sweep {path}: {e}") from None
+    try:
+        spec = SweepSpec.model_validate(raw)
+    except ValidationError as e:
+        raise S.ScenarioError(S._format_validation_error(e).replace("invalid scenario", f"invalid sweep {path}")) from None
+    return spec, path.parent
+
+
+def _literal(v) -> str:
+    """A value as a TOML literal for `apply_overrides`."""
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_literal(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+def cases(spec: SweepSpec) -> list[dict]:
+    """Every case: its index tuple and the overrides it applies."""
+    pts = [a.points() for a in spec.axes]
+    out = []
+    for idx in itertools.product(*[range(len(p)) for p in pts]):
+        ov = {}
+        for a, i in enumerate(idx):
+            ov.update(pts[a][i])
+        tag = "_".join(f"{spec.axes[a].dim}-{i}" for a, i in enumerate(idx))
+        out.append({"index": idx, "overrides": ov, "tag": tag})
+    return out
+
+
+def _base_path(spec: SweepSpec, base_dir: Path) -> str:
+    if spec.base in S.builtin_names():
+        return spec.base
+    p = Path(spec.base)
+    return str(p if p.is_absolute() else base_dir / p)
+
+
+def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[str, S.Scenario]]:
+    """The scenario(s) of one case: two (both directions) in reciprocity mode."""
+    ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in case["overrides"].items()]
+    base = _base_path(spec, base_dir)
+    if spec.mode == "run":
+        return [("run", S.load(base, ov))]
+    a, b = spec.pair
+    out = []
+    for exc in (b, a):  # forward: shock on b measured at a; backward: the reverse
+        out.append((f"shock-{exc.replace(':', '')}", S.load(base, ov + [f'excitations.0.granule="{exc}"'])))
+    return out
+
+
+def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
+    """Run one case (a worker task): writes its NetCDF file(s), returns its metrics or its error."""
+    from .analysis.reciprocity import reciprocity_metrics, run_metrics
+    from .results import read_netcdf, write_netcdf
+    from .run import run_scenario
+
+    spec = SweepSpec.model_validate_json(spec_json)
+    out = Path(out_dir) / "cases"
+    done = out / f"{case['tag']}.json"
+    if done.exists():
+        try:
+            return json.loads(done.read_text())
+        except (OSError, ValueError):
+            pass
+    res: dict = {"tag": case["tag"], "index": list(case["index"]), "overrides": case["overrides"]}
+    try:
+        runs = {}
+        for key, sc in case_scenarios(spec, Path(base_dir), case):
+            path = out / f"{case['tag']}__{key}.nc"
+            text = S.to_toml(sc)
+            ds = None
+            if path.exists():
+                try:
+                    ds = read_netcdf(path)
+                    if ds.attrs.get("scenario") != text:
+                        ds = None
+                except (OSError, ValueError):
+                    ds = None
+            if ds is None:
+                ds = run_scenario(sc)
+                write_netcdf(ds, path)
+            runs[key] = ds
+        if spec.mode == "reciprocity":
+            a, b = spec.pair
+            m = reciprocity_metrics(runs[f"shock-{b.replace(':', '')}"], runs[f"shock-{a.replace(':', '')}"])
+            f, k = m["forward"], m["backward"]
+            res["metrics"] = {
+                "nonreciprocity_index": m["nonreciprocity_index"],
+                "arrival_fwd_s": f["arrival_measured_s"], "arrival_bwd_s": k["arrival_measured_s"],
+                "peak_velocity_fwd": f["peak_velocity_m_s"], "peak_velocity_bwd": k["peak_velocity_m_s"],
+                "energy_far_fwd": f["energy_far_peak_frac"], "energy_far_bwd": k["energy_far_peak_frac"],
+                "solid_energy_fwd": f["solid_energy_peak_frac"], "solid_energy_bwd": k["solid_energy_peak_frac"],
+                "centroid_fwd_hz": f["spectral_centroid_hz"], "centroid_bwd_hz": k["spectral_centroid_hz"],
+                "arrival_solid_fwd_s": f["arrival_solid_s"], "arrival_solid_bwd_s": k["arrival_solid_s"],
+            }
+        else:
+            ds = runs["run"]
+            from .analysis.reciprocity import excitation_of
+
+            label, _ = excitation_of(ds)
+            measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
+            r = run_metrics(ds, measured)
+            res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
+        res["status"] = "ok"
+    except Exception as e:  # noqa: BLE001 - a failing case is recorded, the others go on
+        res["status"] = f"error: {type(e).__name__}: {e}"
+        res["traceback"] = traceback.format_exc(limit=3)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = done.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(res, default=float))
+    tmp.replace(done)
+    return res
+
+
+def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
+    """Axes as dimensions, metrics as variables (NaN where a case failed), `status` per case."""
+    dims = [a.dim for a in spec.axes]
+    shape = tuple(len(a.points()) for a in spec.axes)
+    names = sorted({k for r in results if r.get("status") == "ok" for k in r["metrics"]})
+    data = {k: np.full(shape, np.nan) for k in names}
+    status = np.full(shape, "not run", dtype=object)
+    for r in results:
+        idx = tuple(r["index"])
+        status[idx] = r.get("status", "?")
+        for k, v in r.get("metrics", {}).items():
+            if k in data:
+                data[k][idx] = v
+    coords = {}
+    for a in spec.axes:
+        coords[a.dim] = (a.dim, a.coordinate())
+        if a.zip is not None:
+            for f, vals in a.zip.items():
+                coords[f.replace(".", "_")] = (a.dim, np.asarray(vals))
+    ds = xr.Dataset({k: (dims, v) for k, v in data.items()}, coords=coords)
+    ds["status"] = (dims, status.astype(str))
+    ds.attrs["sweep"] = spec.model_dump_json()
+    ds.attrs["name"] = spec.name
+    return ds
+
+
+def run_sweep(path, out_dir, workers: int = 2, scheduler: str | None = None, progress=None) -> xr.Dataset:
+    """Run every case on dask.distributed; skips cases already finished in out_dir."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    from .results import write_netcdf
+
+    spec, base_dir = load_sweep(path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    todo = cases(spec)
+    spec_json = spec.model_dump_json()
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    results = []
+    try:
+        futures = [client.submit(run_case, spec_json, str(base_dir.resolve()), c, str(out.resolve()), key=f"granel-{_key(spec_json, c)}", pure=False)
+                   for c in todo]
+        for fut in as_completed(futures):
+            r = fut.result()
+            results.append(r)
+            if progress is not None:
+                progress(r)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    ds = summary_dataset(spec, results)
+    write_netcdf(ds, out / "summary.nc")
+    return ds
+
+
+def _key(spec_json: str, case: dict) -> str:
+    return hashlib.sha1((spec_json + case["tag"]).encode()).hexdigest()[:16]
+
+
+def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", x: str | None = None, y: str | None = None):
+    """A metric over two sweep axes; remaining axes become panels (first index of any beyond)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .plots import save
+
+    if metric not in summary:
+        raise ValueError(f"unknown metric {metric!r}; available: {', '.join(v for v in summary.data_vars if v != 'status')}")
+    da = summary[metric]
+    dims = list(da.dims)
+    x = x or dims[0]
+    y = y or (dims[1] if len(dims) > 1 else None)
+    rest = [d for d in dims if d not in (x, y)]
+    panels = [{}]
+    if rest:
+        panels = [{rest[0]: v} for v in da[rest[0]].values]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 3.8), squeeze=False)
+    vmin, vmax = float(np.nanmin(da.values)), float(np.nanmax(da.values))
+    for ax, sel in zip(axes[0], panels):
+        sub = da.sel(sel)
+        for d in rest[1:]:
+            sub = sub.isel({d: 0})
+        if y is None:
+            ax.plot(sub[x].values, sub.values, "o-")
+            ax.set_ylabel(metric)
+        else:
+            sub = sub.transpose(y, x)
+            xv, yv = sub[x].values, sub[y].values
+            xi = np.arange(len(xv)) if xv.dtype.kind not in "fi" else xv
+            yi = np.arange(len(yv)) if yv.dtype.kind not in "fi" else yv
+            m = ax.pcolormesh(xi, yi, sub.values, shading="nearest", vmin=vmin, vmax=vmax, cmap="viridis")
+            if xv.dtype.kind == "f" and np.all(xv > 0) and xv.max() / xv.min() > 20:
+                ax.set_xscale("log")
+            if xv.dtype.kind not in "fi":
+                ax.set_xticks(xi, xv)
+            if yv.dtype.kind not in "fi":
+                ax.set_yticks(yi, yv)
+            ax.set_ylabel(y)
+            fig.colorbar(m, ax=ax, label=metric)
+        ax.set_xlabel(x)
+        ax.set_title(", ".join(f"{k} = {v}" for k, v in sel.items()) or metric, fontsize=9)
+    fig.tight_layout()
+    return save(fig, output)
