@@ -139,7 +139,8 @@ def fast_advance(
     out_iters, out_lam, out_normal, out_vrel,
 ):
     """Advance the coupled system by up to nsteps steps of size dt. Returns (steps done, status):
-    status 0 ok, 1 neighbour list must be rebuilt, 2 no convergence, 3 non-finite state.
+    status 0 ok, 1 neighbour list must be rebuilt, 2 no convergence, 3 the trial state was not
+    finite; on 2 and 3 the state is left at the last accepted step.
 
     Per step the modal work is two (2nc x nmodes) products: Q z for the Newmark predictor at the
     contacts (Q = -P D W^2, z = eta + eta' dt + eta'' dt^2 / 4) and P' F for the accepted
@@ -193,6 +194,7 @@ def fast_advance(
                 v0[c, d] = v0f[2 * c + d]
         converged = False
         it = 0
+        F_start = F.copy()
         normal = np.zeros(nc)
         vrel = np.zeros(nc)
         while it < max_iter:
@@ -238,8 +240,15 @@ def fast_advance(
             for c in range(nc):
                 F[c, 0] += dF[2 * c]
                 F[c, 1] += dF[2 * c + 1]
-        if not converged:
-            return s, 2
+        finite = True
+        for k in range(y.shape[0]):
+            if not math.isfinite(ytr[k]):
+                finite = False
+                break
+        if not converged or not finite:
+            # leave the state at the last accepted step: the caller retries with a smaller step
+            F[:, :] = F_start
+            return s, 2 if not converged else 3
         # accept: modal Newmark with the converged forces
         for r in range(m2):
             rhs[r] = F[r // 2, r % 2]
@@ -259,19 +268,13 @@ def fast_advance(
             u0f[r] += v0f[r] * dt + 0.5 * ab * dt * dt
             v0f[r] += ab * dt
             a0f[r] = acc
-        finite = True
-        for k in range(y.shape[0]):
-            y[k] = ytr[k]
-            if not math.isfinite(y[k]):
-                finite = False
+        y[:] = ytr
         t += dt
         out_iters[s] = it
         for c in range(nc):
             out_lam[s, c] = 0.5 * mu * k_s * normal[c] * dt * ct[c] * (1.0 - math.tanh(k_s * vrel[c]) ** 2)
             out_normal[c] = normal[c]
             out_vrel[c] = vrel[c]
-        if not finite:
-            return s + 1, 3
         for i in range(n):
             ddx = y[2 * i] - ref_pos[i, 0]
             ddy = y[2 * i + 1] - ref_pos[i, 1]
@@ -363,32 +366,43 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
     s_ = system
     ex = stepper.ex
     t_wall = time.perf_counter()
+    H = sim.max_halvings
     for k in range(start, nout):
-        done = 0
-        while done < per:
+        # the interval [t, t + per dt] in ticks of dt / 2^H; a failed step halves the step for
+        # the rest of the interval (Newton not converging or a non-finite trial state)
+        level = 0
+        ticks_left = per * 2**H
+        while ticks_left > 0:
+            h = dt / 2**level
+            nsteps = ticks_left // 2 ** (H - level)
+            if len(out_iters) < nsteps:
+                out_iters = np.zeros(nsteps, dtype=np.int64)
+                out_lam = np.zeros((nsteps, nc))
             nl = stepper.nl
             m, status = fast_advance(
-                y, t, dt, per - done, s_.n, nl.ref_pos, 0.5 * s_.skin,
+                y, t, h, nsteps, s_.n, nl.ref_pos, 0.5 * s_.skin,
                 s_.radius, s_.mass, s_.inertia, s_.law.mu, s_.law.k_s,
                 nl.pi, nl.pj, nl.pA, nl.pG, nl.wg, nl.ww, nl.wA, nl.wG, s_.wall_p0, s_.wall_dir, s_.wall_len, s_.wall_n,
                 s_.sg, s_.sp, s_.sn, s_.sA, s_.sG,
                 ex.eg, ex.edir, ex.ekind, ex.epar, ex.eoff, ex.tab_t, ex.tab_v,
-                w2, P, eta, etad, etaa, F, sim.abstol, sim.reltol, sim.max_iterations, ct,
-                out_iters[done:], out_lam[done:], out_normal, out_vrel,
+                w2, P, eta, etad, etaa, F, sim.abstol, sim.reltol, sim.max_iterations, ct * (h / dt),
+                out_iters, out_lam, out_normal, out_vrel,
             )
             for j in range(m):
-                steps["t"].append(t + (j + 1) * dt)
-                steps["dt"].append(dt)
-                steps["iterations"].append(int(out_iters[done + j]))
-                steps["lambda"].append(out_lam[done + j].copy())
-            t += m * dt
-            done += m
-            if status == 2:
-                raise ConvergenceError(
-                    f"t = {t:.6e} s, dt = {dt:.3e} s: Newton on the interface forces did not converge in "
-                    f"{sim.max_iterations} iterations; reduce simulation.dt or raise simulation.max_iterations")
-            if status == 3:
-                raise RuntimeError(f"state became non-finite at t = {t:.6e} s (dt = {dt:.3e} s): reduce simulation.dt")
+                steps["t"].append(t + (j + 1) * h)
+                steps["dt"].append(h)
+                steps["iterations"].append(int(out_iters[j]))
+                steps["lambda"].append(out_lam[j].copy())
+            t += m * h
+            ticks_left -= m * 2 ** (H - level)
+            if status in (2, 3):
+                if level == H:
+                    why = "Newton on the interface forces did not converge" if status == 2 else "the state became non-finite"
+                    raise ConvergenceError(
+                        f"t = {t:.6e} s: {why} even at dt = {h:.3e} s ({H} halvings of {dt:.3e} s); reduce "
+                        "simulation.dt, raise simulation.max_halvings or simulation.max_iterations, or lower k_s")
+                level += 1
+                continue
             if status == 1:
                 stepper.nl = build_neighbours(system, GranularState(y, t).pos.copy())
                 stepper.rebuilds += 1
