@@ -17,12 +17,14 @@ install: $(VENV)/.installed
 
 demo: install
 	$(BIN)/granel run paper --solid rigid --excite LSGM:3 --shock strong -o demo-out/paper-rigid-LSGM3-strong.nc
+	$(BIN)/granel paper --out demo-out
 
 test: install
 	$(BIN)/python -m pytest -q
 
 bench: install
 	$(BIN)/python benchmarks/bench_granular.py
+	$(BIN)/python benchmarks/bench_scaling.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache

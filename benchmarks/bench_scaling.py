@@ -1,0 +1,58 @@
+"""Coupled-solver scaling: seconds per simulated millisecond vs granules and vs solid DOFs.
+
+Run: .venv/bin/python benchmarks/bench_scaling.py [--duration 0.05ms] [--repeat 1]
+
+(a) granules: the paper's plate with the LSGM replaced by a wide hexagonal medium of R = 5 mm
+    granules in columns of 10 and 9 (about 1,000 and 10,000 granules), strong shock on LSGM:3;
+(b) solid DOFs: the paper's 28 granules against the plate meshed more and more finely.
+The fast solver keeps all modes of the solid, so its setup (a dense eigendecomposition, cached)
+grows as DOFs^3 and each step as DOFs x contacts: solids beyond about 8,000 DOFs are out of
+its reach (see docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from granel import scenario as S
+from granel.run import run_scenario
+from granel.units import parse_time
+
+
+def timed(overrides, duration):
+    sc = S.load("paper", [f'simulation.duration="{duration}"', 'simulation.solver="fast"', *overrides])
+    run_scenario(S.load("paper", ['simulation.duration="1us"', 'simulation.solver="fast"', *overrides]))  # modes, compile
+    t0 = time.perf_counter()
+    ds = run_scenario(sc)
+    wall = time.perf_counter() - t0
+    return wall, ds
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--duration", default="0.05ms")
+    a = ap.parse_args()
+    ms = parse_time(a.duration) * 1e3
+    print(f"(a) cost vs granules (paper plate, {a.duration} simulated)")
+    print(f"{'granules':>10}{'solid DOFs':>12}{'wall [s]':>10}{'s per sim. ms':>15}{'us per granule-step':>22}")
+    rows = []
+    for pairs in (0, 50, 526):
+        ov = [] if pairs == 0 else ["media.0.radius=0.005", f"media.0.columns={[10, 9] * pairs}"]
+        wall, ds = timed(ov, a.duration)
+        n = ds.sizes["granule"]
+        steps = int(ds.attrs["solver_steps"])
+        rows.append((n, wall / ms))
+        print(f"{n:>10}{int(ds.attrs['solid_dofs']):>12}{wall:>10.2f}{wall / ms:>15.2f}{1e6 * wall / (steps * n):>22.3f}")
+    (n1, c1), (n2, c2) = rows[1], rows[2]
+    print(f"cost ratio {c2 / c1:.2f} for granule ratio {n2 / n1:.2f} (linear: equal)")
+    print(f"\n(b) cost vs solid DOFs (28 granules, strong shock on SSGM:C, {a.duration} simulated)")
+    print(f"{'mesh':>22}{'solid DOFs':>12}{'wall [s]':>10}{'s per sim. ms':>15}")
+    for nx, g, mx in ((4, 2.0, 5e-3), (6, 1.6, 2e-3), (8, 1.6, 2.5e-3)):
+        ov = ['excitations.0.granule="SSGM:C"', f"solid.mesh.nx={nx}", f"solid.mesh.growth={g}", f"solid.mesh.max_size={mx}"]
+        wall, ds = timed(ov, a.duration)
+        print(f"{f'nx={nx}, g={g}, max={mx}':>22}{int(ds.attrs['solid_dofs']):>12}{wall:>10.2f}{wall / ms:>15.2f}")
+
+
+if __name__ == "__main__":
+    main()
