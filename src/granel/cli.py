@@ -105,6 +105,7 @@ def run(
         except RuntimeError as e:
             _fail(f"run stopped: {e}", code=3)
     write_netcdf(ds, output)
+    output.with_suffix(".ckpt").unlink(missing_ok=True)  # finished: the result replaces the checkpoint
     summary = summarize(ds)
     summary["output"] = str(output)
     if json_summary:
