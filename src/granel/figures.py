@@ -86,10 +86,11 @@ def fig3_velocities(fwd, bwd, out):
     s_f = directed_velocity(fwd, B, dB)
     s_b = directed_velocity(bwd, A, dA)
     a_lab, b_lab = A.split(":")[1], B.split(":")[1]
-    ax2.plot(fwd["time"].values * 1e3, s_f, label=f"v_{b_lab}{a_lab}: granule {B} (shock on {A})")
-    ax2.plot(bwd["time"].values * 1e3, s_b, label=f"v_{a_lab}{b_lab}: granule {A} (shock on {B})")
+    # the free-edge granules are pushed outward by the arriving wave: plot the outward velocity
+    ax2.plot(fwd["time"].values * 1e3, -s_f, label=f"v_{b_lab}{a_lab}: granule {B} (shock on {A})")
+    ax2.plot(bwd["time"].values * 1e3, -s_b, label=f"v_{a_lab}{b_lab}: granule {A} (shock on {B})")
     ax2.set_xlabel("time [ms]")
-    ax2.set_ylabel("velocity toward the solid [m/s]")
+    ax2.set_ylabel("outward velocity (away from the solid) [m/s]")
     ax2.set_title(f"(b) swapped excitation and measurement ({fwd.attrs.get('solid_kind', '')})")
     ax2.legend(fontsize=8)
     return save_both(fig, out)
