@@ -5,8 +5,6 @@ resumed with the scenario that wrote it."""
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -18,22 +16,15 @@ def fingerprint(text: str) -> str:
 
 def save_checkpoint(path: str | Path, fp: str, arrays: dict, recorded: dict, times: list) -> Path:
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"__fingerprint": np.array(fp), "__times": np.asarray(times)}
     for k, v in arrays.items():
         payload[f"state:{k}"] = np.asarray(v)
     for k, v in recorded.items():
         payload[f"rec:{k}"] = np.asarray(v)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    from .results import atomic_path
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **payload)
     return path
 
 

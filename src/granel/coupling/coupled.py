@@ -229,14 +229,7 @@ def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None
         from ..granular.system import build_neighbours
 
         stepper.nl = build_neighbours(system, arrays["ref_pos"])
-        for k, v in recorded.items():
-            if k.startswith("step:"):
-                steps[k[5:]] = list(v)
-            elif k.startswith("solid:"):
-                solid_rec[k[6:]] = list(v)
-            else:
-                rec.rec[k] = list(v)
-        rec.times = times
+        unpack_records(recorded, times, rec, steps, solid_rec)
         start = int(arrays["k"])
     else:
         snapshot()
@@ -259,15 +252,32 @@ def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None
         if progress is not None:
             progress(st.ticks * sim.dt / 2**H)
         if ck_per and (k + 1) % ck_per == 0 and k + 1 < nout:
-            recorded = dict(rec.rec)
-            recorded.update({f"step:{a}": b for a, b in steps.items()})
-            recorded.update({f"solid:{a}": b for a, b in solid_rec.items()})
             save_checkpoint(checkpoint, fp, {
                 "y": st.y, "sx": st.solid.x, "sv": st.solid.v, "sa": st.solid.a, "F": st.F, "normal": st.normal,
                 "vrel": st.vrel, "ticks": st.ticks, "level": st.level, "ref_pos": stepper.nl.ref_pos, "k": k + 1,
-            }, recorded, rec.times)
+            }, pack_records(rec, steps, solid_rec), rec.times)
     wall = time.perf_counter() - t_wall
     return _dataset(sc, system, model, rec, steps, solid_rec, wall, prob)
+
+
+def pack_records(rec, steps: dict, solid_rec: dict) -> dict:
+    """Everything recorded so far, flattened for a checkpoint."""
+    out = dict(rec.rec)
+    out.update({f"step:{a}": b for a, b in steps.items()})
+    out.update({f"solid:{a}": b for a, b in solid_rec.items()})
+    return out
+
+
+def unpack_records(recorded: dict, times, rec, steps: dict, solid_rec: dict) -> None:
+    """Inverse of `pack_records`, into the given containers."""
+    for k, v in recorded.items():
+        if k.startswith("step:"):
+            steps[k[5:]] = list(v)
+        elif k.startswith("solid:"):
+            solid_rec[k[6:]] = list(v)
+        else:
+            rec.rec[k] = list(v)
+    rec.times = times
 
 
 def _dataset(sc, system, model, rec, steps, solid_rec, wall, prob, solver_name="paper", modes=None) -> xr.Dataset:

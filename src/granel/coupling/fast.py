@@ -292,7 +292,7 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
     from ..checkpoint import fingerprint, load_checkpoint, save_checkpoint
     from ..granular.system import GranularState, Stepper, build_neighbours
     from ..solid.build import build_solid
-    from .coupled import ConvergenceError, _dataset
+    from .coupled import ConvergenceError, _dataset, pack_records, unpack_records
     from .rigid import Recorder
 
     sim = sc.simulation
@@ -350,14 +350,7 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
         F[:] = arrays["F"]
         t = float(arrays["t"])
         stepper.nl = build_neighbours(system, arrays["ref_pos"])
-        for k, v in recorded.items():
-            if k.startswith("step:"):
-                steps[k[5:]] = list(v)
-            elif k.startswith("solid:"):
-                solid_rec[k[6:]] = list(v)
-            else:
-                rec.rec[k] = list(v)
-        rec.times = times
+        unpack_records(recorded, times, rec, steps, solid_rec)
         start = int(arrays["k"])
     else:
         snapshot()
@@ -412,11 +405,9 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
         if progress is not None:
             progress(t)
         if ck_per and (k + 1) % ck_per == 0 and k + 1 < nout:
-            recorded = dict(rec.rec)
-            recorded.update({f"step:{a}": b for a, b in steps.items()})
-            recorded.update({f"solid:{a}": b for a, b in solid_rec.items()})
             save_checkpoint(checkpoint, fp, {"y": y, "eta": eta, "etad": etad, "etaa": etaa, "F": F, "t": t,
-                                             "ref_pos": stepper.nl.ref_pos, "k": k + 1}, recorded, rec.times)
+                                             "ref_pos": stepper.nl.ref_pos, "k": k + 1},
+                            pack_records(rec, steps, solid_rec), rec.times)
     wall = time.perf_counter() - t_wall
 
     class _Prob:  # what _dataset reads
