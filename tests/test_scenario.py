@@ -101,6 +101,17 @@ v = [1.0, 0.0]
     system, state, _ = S.build_granular(sc, sc.base)
     assert system.labels == ["M:a", "M:b"]
     assert state.vel[0, 0] == 1.0
+    # per-granule materials
+    (tmp_path / "g.csv").write_text("label,x,y,radius,material\na,0,0,0.005,\nb,0.0101,0,0.005,soft\n")
+    text = (tmp_path / "s.toml").read_text()
+    (tmp_path / "s.toml").write_text(text + "[materials.soft]\nE = 2e9\nrho = 1200.0\nnu = 0.4\n[materials.steel]\nE = 200e9\nrho = 7850.0\nnu = 0.3\n")
+    sc = S.load(tmp_path / "s.toml")
+    system, _, _ = S.build_granular(sc, sc.base)
+    assert list(system.E) == [200e9, 2e9] and system.mass[1] == pytest.approx(4 / 3 * math.pi * 0.005**3 * 1200)
+    (tmp_path / "g.csv").write_text("label,x,y,radius,material\na,0,0,0.005,wood\nb,0.0101,0,0.005,\n")
+    with pytest.raises(S.ScenarioError, match="wood"):
+        S.load(tmp_path / "s.toml")
+    (tmp_path / "s.toml").write_text(text)
     (tmp_path / "g.csv").write_text("label,x,y,radius\na,0,0,0.005\nb,0.0099,0,0.005\n")
     with pytest.raises(S.ScenarioError, match="overlap"):
         S.load(tmp_path / "s.toml")

@@ -370,7 +370,7 @@ def build_media(sc: Scenario, base: Path | None = None):
                 path = base / path
             try:
                 rows = read_granules_csv(path)
-                med = medium_from_table(m.name, rows, mat, m.side)
+                med = medium_from_table(m.name, rows, mat, m.side, {k: v.material() for k, v in sc.materials.items()})
             except (OSError, ValueError, KeyError) as e:
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: {e}") from None
             if np.any(med.radius <= 0):
@@ -472,7 +472,8 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
         elif e.history.kind == "burst":
             bounds.append(1.0 / (e.history.params[1] * 20.0))
     if speed > 0 and system.n:
-        for g in np.unique(np.round(system.radius, 12), return_index=True)[1]:
+        kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
+        for g in np.unique(kinds, axis=0, return_index=True)[1]:
             R, m = system.radius[g], system.mass[g]
             E2 = effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g])
             Ew = effective_modulus(system.E[g], system.nu[g])

@@ -40,10 +40,14 @@ class Medium:
     side: str = "left"  # which side of the solid it sits on: left | right | none
     walls: list[Wall] = field(default_factory=list)
     contact_granules: list[int] = field(default_factory=list)  # indices touching the solid face
+    granule_materials: list[Material] | None = None  # per granule, overriding `material`
 
     @property
     def n(self) -> int:
         return len(self.labels)
+
+    def materials(self) -> list[Material]:
+        return list(self.granule_materials) if self.granule_materials is not None else [self.material] * self.n
 
 
 def alpha_labels(n: int) -> list[str]:
@@ -131,16 +135,26 @@ def hexagonal_columns(
     return Medium(name, lab, pos, np.full(n, R), material, side, walls, contact)
 
 
-def medium_from_table(name: str, rows: list[dict], material: Material, side: str = "none") -> Medium:
-    """A medium from explicit granules: rows of {label, x, y, radius}."""
+def medium_from_table(name: str, rows: list[dict], material: Material, side: str = "none",
+                      materials: dict[str, Material] | None = None) -> Medium:
+    """A medium from explicit granules: rows of {label, x, y, radius[, material]}; a row's
+    `material` names an entry of `materials` (empty: the medium's material)."""
     lab = [str(r["label"]) for r in rows]
     pos = np.array([[float(r["x"]), float(r["y"])] for r in rows])
     rad = np.array([float(r["radius"]) for r in rows])
-    return Medium(name, lab, pos, rad, material, side, [], [])
+    per = None
+    if any(r.get("material") for r in rows):
+        per = []
+        for r in rows:
+            key = (r.get("material") or "").strip()
+            if key and (materials is None or key not in materials):
+                raise ValueError(f"granule {r['label']}: unknown material {key!r}; defined: {sorted(materials or {})}")
+            per.append(materials[key] if key else material)
+    return Medium(name, lab, pos, rad, material, side, [], [], per)
 
 
 def read_granules_csv(path) -> list[dict]:
-    """Read `label,x,y,radius` rows (header required)."""
+    """Read `label,x,y,radius[,material]` rows (header required)."""
     import csv
 
     with open(path, newline="") as fh:

@@ -143,9 +143,10 @@ def build_system(
         mi += [k] * m.n
         pos.append(m.pos)
         rad.append(m.radius)
-        E += [m.material.E] * m.n
-        nu += [m.material.nu] * m.n
-        rho += [m.material.rho] * m.n
+        mats = m.materials()
+        E += [x.E for x in mats]
+        nu += [x.nu for x in mats]
+        rho += [x.rho for x in mats]
         walls += m.walls
     walls += list(extra_walls or [])
     rad = np.concatenate(rad) if rad else np.zeros(0)
