@@ -65,6 +65,8 @@ class CoupledProblem:
     reltol: float
     max_iterations: int
     adaptive: bool
+    newton: bool = False  # Newton on the interface forces (fast solver, sparse path) instead of fixed point
+    forced_level: int = 0  # halvings imposed after a failed Newton step
     diag: dict = field(default_factory=dict)
 
 
@@ -96,6 +98,7 @@ def choose_level(prob: CoupledProblem, st: CoupledState, ticks_to_output: int) -
                     f"{prob.iface.model.contacts[int(np.argmax(lam))].name}); raise simulation.max_halvings or lower k_s"
                 )
             n += 1
+    n = max(n, prob.forced_level)
     # a larger step only where the clock is aligned to it, and never past the next output
     while n < H and (st.ticks % 2 ** (H - n) != 0 or 2 ** (H - n) > ticks_to_output):
         n += 1
@@ -137,9 +140,12 @@ def paper_step(prob: CoupledProblem, st: CoupledState, ticks_to_output: int) -> 
         F_new, normal, vrel, _ = stepper.solid_contact_state(gstate, u1, v1)
         dF = np.abs(F_new - F)
         ok = dF <= prob.abstol + prob.reltol * np.abs(F)
-        F = F_new
-        if ok.all():
-            break
+        if ok.all() or not prob.newton:
+            F = F_new
+            if ok.all():
+                break
+            continue
+        F = F + newton_update(stepper, gstate.y, u1, v1, ops.C, dt, F_new - F)
     else:
         k = int(np.argmax(np.where(ok, 0.0, dF).max(axis=1)))
         raise ConvergenceError(
@@ -160,6 +166,21 @@ def paper_step(prob: CoupledProblem, st: CoupledState, ticks_to_output: int) -> 
     return StepReport(dt, it, lam)
 
 
+def newton_update(stepper, y, u1, v1, C, dt, residual):
+    """dF solving (I - J) dF = G(F) - F, J = Du (dt^2/4) C + Dw (dt/2) C with the analytic
+    contact-law derivatives at the contact points (the granules' sensitivity left out)."""
+    from .fast import contact_forces_jacobian
+
+    s = stepper.system
+    _, _, _, Du, Dw = contact_forces_jacobian(y, s.n, s.radius, s.law.mu, s.law.k_s, s.sg, s.sp, s.sn, s.sA, s.sG, u1, v1)
+    nc = len(Du)
+    J = np.zeros((2 * nc, 2 * nc))
+    for c in range(nc):
+        rows = slice(2 * c, 2 * c + 2)
+        J[rows] = Du[c] @ C[rows] * (0.25 * dt * dt) + Dw[c] @ C[rows] * (0.5 * dt)
+    return np.linalg.solve(np.eye(2 * nc) - J, residual.ravel()).reshape(nc, 2)
+
+
 class _GState:
     """A light granular state (y, t) for trial integrations."""
 
@@ -176,21 +197,30 @@ class _GState:
 
 
 def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None) -> xr.Dataset:
-    """Run a scenario with an elastic solid (plate or beam) by the paper's algorithm."""
-    sim = sc.simulation
-    if sim.solver == "fast":
+    """Run a scenario with an elastic solid (plate or beam): the fast solver (default) or the
+    paper's algorithm."""
+    if sc.simulation.solver == "fast":
         from .fast import simulate_fast
 
         return simulate_fast(sc, progress, checkpoint, resume)
+    return simulate_sparse(sc, progress, checkpoint, resume, newton=False)
+
+
+def simulate_sparse(sc: S.Scenario, progress=None, checkpoint=None, resume=None, newton=False, model=None) -> xr.Dataset:
+    """Sparse-direct Newmark coupled to the granules. newton=False: the paper's algorithm (fixed
+    point, step halving by (A9)-(B1)); newton=True: the fast solver's Newton iteration at dtau0
+    (a step that does not converge is retried at half the step), for solids too large for the
+    all-mode path."""
+    sim = sc.simulation
     system, gstate0, media = S.build_granular(sc, sc.base)
     stepper = Stepper(system)
-    model = build_solid(sc, system)
+    model = build_solid(sc, system) if model is None else model
     nm = Newmark(model.M, model.K)
     tangents = np.array([[-c.normal[1], c.normal[0]] for c in system.solid_contacts]).reshape(-1, 2)
     iface = Interface(model, nm, tangents)
     H = sim.max_halvings
     prob = CoupledProblem(stepper, iface, nm, sim.dt, H, sim.lambda_max, sim.abstol, sim.reltol,
-                          sim.max_iterations, adaptive=bool(iface.has_tangent.any()))
+                          sim.max_iterations, adaptive=bool(iface.has_tangent.any()) and not newton, newton=newton)
     nc = iface.nc
     st = CoupledState(gstate0.y.copy(), nm.initial(), np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc))
     per = max(1, int(round(sim.output_every / sim.dt)))
@@ -239,13 +269,20 @@ def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None
     for k in range(start, nout):
         target = (k + 1) * out_ticks
         while st.ticks < target:
-            rep = paper_step(prob, st, target - st.ticks)
+            try:
+                rep = paper_step(prob, st, target - st.ticks)
+            except ConvergenceError:
+                if not newton or prob.forced_level >= H:
+                    raise
+                prob.forced_level += 1  # retry this step at half the step (state untouched)
+                continue
             steps["t"].append(st.ticks * sim.dt / 2**H)
             steps["dt"].append(rep.dt)
             steps["iterations"].append(rep.iterations)
             steps["lambda"].append(rep.lam.copy())
             if not np.isfinite(st.y).all() or not np.isfinite(st.solid.x).all():
                 raise RuntimeError(f"state became non-finite at t = {st.ticks * sim.dt / 2**H:.6e} s")
+        prob.forced_level = 0  # back to dtau0 after each output interval
         snapshot()
         if (k + 1) % solid_per == 0:
             solid_snapshot()
@@ -257,7 +294,7 @@ def simulate_coupled(sc: S.Scenario, progress=None, checkpoint=None, resume=None
                 "vrel": st.vrel, "ticks": st.ticks, "level": st.level, "ref_pos": stepper.nl.ref_pos, "k": k + 1,
             }, pack_records(rec, steps, solid_rec), rec.times)
     wall = time.perf_counter() - t_wall
-    return _dataset(sc, system, model, rec, steps, solid_rec, wall, prob)
+    return _dataset(sc, system, model, rec, steps, solid_rec, wall, prob, solver_name="fast-sparse" if newton else "paper")
 
 
 def pack_records(rec, steps: dict, solid_rec: dict) -> dict:

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from ..granular import kernels
-from ..solid.modal import Modes, modal_analysis
+from ..solid.modal import DENSE_LIMIT, Modes, modal_analysis
 
 
 # ---------------------------------------------------------------- modes with an on-disk cache
@@ -299,6 +299,11 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
     system, g0, media = S.build_granular(sc, sc.base)
     stepper = Stepper(system)
     model = build_solid(sc, system)
+    if model.ndof > DENSE_LIMIT:
+        # all modes are out of reach: sparse-direct Newmark with the same Newton coupling
+        from .coupled import simulate_sparse
+
+        return simulate_sparse(sc, progress, checkpoint, resume, newton=True, model=model)
     modes = all_modes(model)
     B = model.contact_map()
     P = np.ascontiguousarray((B @ modes.shapes))
