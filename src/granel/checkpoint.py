@@ -41,3 +41,10 @@ def load_checkpoint(path: str | Path, fp: str) -> tuple[dict, dict, list]:
         rec = {k[4:]: list(z[k]) for k in z.files if k.startswith("rec:")}
         times = list(z["__times"])
     return state, rec, times
+
+
+def checkpoint_period(checkpoint, every: float, output_steps: int, dt: float) -> int:
+    """Output intervals between checkpoints (0: no checkpoints)."""
+    if not checkpoint or every <= 0:
+        return 0
+    return max(1, int(round(every / (output_steps * dt))))

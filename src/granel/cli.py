@@ -47,6 +47,13 @@ def _overrides(solid, excite, shock, fmax, duration, dt, output_every, solver, s
     return ov + list(sets or [])
 
 
+def _load_or_fail(name: str, overrides: list[str]) -> S.Scenario:
+    try:
+        return load_scenario(name, overrides)
+    except S.ScenarioError as e:
+        _fail(str(e))
+
+
 def load_scenario(name: str, overrides: list[str]) -> S.Scenario:
     raw, base = S.load_raw(name)
     raw = S.apply_overrides(raw, [o for o in overrides if o != "excitations.0.fmax=nan"])
@@ -85,10 +92,7 @@ def run(
     ov = _overrides(solid, excite, shock, fmax, duration, dt, output_every, solver, set_)
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
-    try:
-        sc = load_scenario(scenario, ov)
-    except S.ScenarioError as e:
-        _fail(str(e))
+    sc = _load_or_fail(scenario, ov)
     total = sc.simulation.duration
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
                   TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
@@ -150,10 +154,7 @@ def show(
     """Draw the packing with labels, walls, the solid and the excitations."""
     from .plots import plot_geometry
 
-    try:
-        sc = load_scenario(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
-    except S.ScenarioError as e:
-        _fail(str(e))
+    sc = _load_or_fail(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
     plot_geometry(sc, output)
     console.print(f"wrote {output}")
 
@@ -179,10 +180,7 @@ def modes(
     from .solid.build import build_solid
     from .solid.modal import classify_modes, modal_analysis
 
-    try:
-        sc = load_scenario(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
-    except S.ScenarioError as e:
-        _fail(str(e))
+    sc = _load_or_fail(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
     if sc.solid is None or sc.solid.kind == "rigid":
         _fail("modes: the solid is rigid; choose --solid plate or --solid beam")
     system, _, _ = S.build_granular(sc, sc.base)
@@ -271,10 +269,7 @@ def reciprocity(
     runs = {}
     for exc in (b, a):
         ov = _overrides(solid, exc, shock, fmax, duration, None, None, None, set_)
-        try:
-            sc = load_scenario(scenario, ov)
-        except S.ScenarioError as e:
-            _fail(str(e))
+        sc = _load_or_fail(scenario, ov)
         with console.status(f"running with the shock on {exc}"):
             ds = run_scenario(sc)
         write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")

@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from .. import scenario as S
-from ..checkpoint import fingerprint, load_checkpoint, save_checkpoint
+from ..checkpoint import checkpoint_period, fingerprint, load_checkpoint, save_checkpoint
 from ..granular.system import Stepper
 from ..results import base_attrs, granular_dataset
 from ..solid.build import build_solid
@@ -264,7 +264,7 @@ def simulate_sparse(sc: S.Scenario, progress=None, checkpoint=None, resume=None,
     else:
         snapshot()
         solid_snapshot()
-    ck_per = max(1, int(round(sim.checkpoint_every / (per * sim.dt)))) if checkpoint and sim.checkpoint_every > 0 else 0
+    ck_per = checkpoint_period(checkpoint, sim.checkpoint_every, per, sim.dt)
     t_wall = time.perf_counter()
     for k in range(start, nout):
         target = (k + 1) * out_ticks

@@ -289,7 +289,7 @@ def fast_advance(
 def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
     """Run a scenario with an elastic solid by the fast solver; returns the result Dataset."""
     from .. import scenario as S
-    from ..checkpoint import fingerprint, load_checkpoint, save_checkpoint
+    from ..checkpoint import checkpoint_period, fingerprint, load_checkpoint, save_checkpoint
     from ..granular.system import GranularState, Stepper, build_neighbours
     from ..solid.build import build_solid
     from .coupled import ConvergenceError, _dataset, pack_records, unpack_records
@@ -360,7 +360,7 @@ def simulate_fast(sc, progress=None, checkpoint=None, resume=None):
     else:
         snapshot()
         solid_snapshot()
-    ck_per = max(1, int(round(sim.checkpoint_every / (per * dt)))) if checkpoint and sim.checkpoint_every > 0 else 0
+    ck_per = checkpoint_period(checkpoint, sim.checkpoint_every, per, dt)
     s_ = system
     ex = stepper.ex
     t_wall = time.perf_counter()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..checkpoint import load_checkpoint, save_checkpoint
+from ..checkpoint import checkpoint_period, load_checkpoint, save_checkpoint
 from ..granular.system import GranularState, Stepper, build_neighbours
 
 
@@ -64,7 +64,7 @@ def simulate_rigid(stepper: Stepper, state: GranularState, duration: float, dt: 
         start = int(st["k"])
     else:
         rec.snapshot(stepper, state)
-    ck_per = max(1, int(round(checkpoint_every / (per * dt)))) if checkpoint and checkpoint_every > 0 else 0
+    ck_per = checkpoint_period(checkpoint, checkpoint_every, per, dt)
     for k in range(start, nout):
         stepper.advance(state, dt, per)
         rec.snapshot(stepper, state)
