@@ -22,7 +22,7 @@ def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None) ->
     t0 = time.perf_counter()
     fp = fingerprint(S.to_toml(sc))
     if kind == "rigid":
-        stepper = Stepper(system)
+        stepper = Stepper(system, substep=True)
         rec = simulate_rigid(stepper, state, sim.duration, sim.dt, sim.output_every, progress,
                              checkpoint if sim.checkpoint_every > 0 else None, sim.checkpoint_every, resume, fp)
         steps = int(round(rec.times[-1] / sim.dt))

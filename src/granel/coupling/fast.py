@@ -192,6 +192,10 @@ def fast_advance(
             for d in range(2):
                 u0[c, d] = u0f[2 * c + d]
                 v0[c, d] = v0f[2 * c + d]
+        # stiff friction (large k_s): RK4 sub-steps for the granules inside the coupled step
+        rate = kernels.friction_rate(y, n, radius, mass, inertia, mu, k_s, pi_, pj_, pA, pG, wg, ww, wA, wG,
+                                     wall_p0, wall_dir, wall_len, wall_n, sg, sp, sn, sA, sG, u0)
+        rate *= 1.5  # forces may grow within the step
         converged = False
         it = 0
         F_start = F.copy()
@@ -210,9 +214,9 @@ def fast_advance(
                 u1[c, d] = u0f[r] + v0f[r] * dt + 0.5 * abar[c, d] * dt * dt
                 v1[c, d] = v0f[r] + abar[c, d] * dt
             ytr[:] = y
-            kernels.rk4_advance(ytr, t, dt, 1, n, ref_pos, 1e300, radius, mass, inertia, mu, k_s,
-                                pi_, pj_, pA, pG, wg, ww, wA, wG, wall_p0, wall_dir, wall_len, wall_n,
-                                sg, sp, sn, sA, sG, u0, v0, abar, eg, edir, ekind, epar, eoff, tab_t, tab_v)
+            kernels.rk4_substepped(ytr, t, dt, n, ref_pos, radius, mass, inertia, mu, k_s,
+                                   pi_, pj_, pA, pG, wg, ww, wA, wG, wall_p0, wall_dir, wall_len, wall_n,
+                                   sg, sp, sn, sA, sG, u0, v0, abar, eg, edir, ekind, epar, eoff, tab_t, tab_v, rate)
             G, normal, vrel, Du, Dw = contact_forces_jacobian(ytr, n, radius, mu, k_s, sg, sp, sn, sA, sG, u1, v1)
             ok = True
             for c in range(nc):

@@ -323,6 +323,7 @@ class Stepper:
     nl: NeighbourList = None
     ex: ExcitationArrays = None
     rebuilds: int = 0
+    substep: bool = False  # split steps into RK4 sub-steps where the friction is stiff (large k_s)
 
     def __post_init__(self):
         self.nl = build_neighbours(self.system, self.system.pos0)
@@ -342,7 +343,8 @@ class Stepper:
         while done < nsteps:
             nl = self.nl
             ex = self.ex
-            k = kernels.rk4_advance(
+            kernel = kernels.rk4_advance_substepped if self.substep else kernels.rk4_advance
+            k = kernel(
                 state.y, state.t, dt, nsteps - done, s.n, nl.ref_pos, 0.5 * s.skin,
                 s.radius, s.mass, s.inertia, s.law.mu, s.law.k_s,
                 nl.pi, nl.pj, nl.pA, nl.pG,
