@@ -93,3 +93,31 @@ def test_resume_gives_the_uninterrupted_result(tmp_path):
     assert np.array_equal(np.array(resumed.rec["balance_error"]), np.array(full.rec["balance_error"]))
     with pytest.raises(RuntimeError, match="different scenario"):
         simulate_rigid(stepper, state, 1e-4, 4e-8, 1e-6, None, ck, 2e-5, ck, "other")
+
+
+def test_modes_command_json_and_plot(tmp_path):
+    res = runner.invoke(app, ["modes", "--solid", "beam", "--json", "--count", "5"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert out["dofs"] == 78 and out["elements"] == 40 and out["kinds"] == ["bending"] * 5
+    assert out["periods_ms"][0] == pytest.approx(0.192735, rel=1e-4)
+    res = runner.invoke(app, ["modes", "--solid", "plate", "--json", "--count", "7", "--plot", str(tmp_path / "m.png")])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout[: res.stdout.rindex("}") + 1])
+    assert out["kinds"][3] == "axial" and out["kinds"][6] == "bulk"
+    assert (tmp_path / "m.png").stat().st_size > 50_000
+    res = runner.invoke(app, ["modes", "--solid", "rigid"])
+    assert res.exit_code == 2
+
+
+def test_animate_command(tmp_path):
+    out = tmp_path / "r.nc"
+    res = runner.invoke(app, ["run", "paper", "--solid", "beam", "--excite", "SSGM:C", "--duration", "0.01ms", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["animate", str(out), "-o", str(tmp_path / "m.mp4"), "--frames", "3", "--field", "energy-density"])
+    assert res.exit_code == 0, res.output
+    import imageio.v3 as iio
+
+    assert iio.imread(tmp_path / "m.mp4").shape[0] == 3
+    res = runner.invoke(app, ["animate", str(out), "--field", "sound"])
+    assert res.exit_code == 2

@@ -81,6 +81,12 @@ def animate(ds, out, field: str = "deformation", magnification: float | None = N
         ylim = [min(ylim[0], model.nodes[:, 1].min() - 0.05 * rmax), max(ylim[1], model.nodes[:, 1].max() + 0.05 * rmax)]
     frames = []
     fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=100)
+    if field == "energy-density":
+        from matplotlib.cm import ScalarMappable
+        from matplotlib.colors import LogNorm
+
+        fig.colorbar(ScalarMappable(norm=LogNorm(1e-6, 1.0), cmap="inferno"), ax=ax, shrink=0.8,
+                     label="normalised energy density w / w0, eq. (14)")
     for k in idx:
         ax.clear()
         t = float(times[k])
@@ -99,7 +105,7 @@ def animate(ds, out, field: str = "deformation", magnification: float | None = N
             ax.set_title(f"deformation x{mag:g}, t = {t * 1e3:.3f} ms", fontsize=9)
         else:
             draw_energy_density(ax, ds, t, modes=modes)
-            ax.set_title(f"normalised energy density (log, 1e-6..1), t = {t * 1e3:.3f} ms", fontsize=9)
+            ax.set_title(f"normalised energy density, t = {t * 1e3:.3f} ms", fontsize=9)
         ax.set_aspect("equal")
         ax.autoscale_view()
         ax.set_xlim(*xlim)
