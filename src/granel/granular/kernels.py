@@ -26,6 +26,32 @@ ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
+def contact_law(A, G, delta, ddelta, vt, mu, k_s):
+    """Eqs. (2), (3), (5): normal force magnitude fn (repulsive > 0), tangential force ft along
+    t, and the damping coefficient gamma, for overlap delta > 0, overlap rate ddelta and relative
+    tangential velocity vt."""
+    gam = G * math.sqrt(math.sqrt(delta))
+    fn = A * delta * math.sqrt(delta) + gam * ddelta
+    ft = -mu * abs(fn) * math.tanh(k_s * vt)
+    return fn, ft, gam
+
+
+@njit(cache=True, inline="always")
+def _one_sided(dy, i, V, OM, nx, ny, delta, rvx, rvy, Ri, wi, A, G, mu, k_s):
+    """Forces and torque on granule i from a flat partner (wall or solid point) along n_ik =
+    (nx, ny), given its velocity relative to the partner; returns (viscous, friction) power lost."""
+    tx = -ny
+    ty = nx
+    ddelta = rvx * nx + rvy * ny
+    vt = rvx * tx + rvy * ty + Ri * wi
+    fn, ft, gam = contact_law(A, G, delta, ddelta, vt, mu, k_s)
+    dy[V + 2 * i] += -fn * nx + ft * tx
+    dy[V + 2 * i + 1] += -fn * ny + ft * ty
+    dy[OM + i] += Ri * ft
+    return gam * ddelta * ddelta, -ft * vt
+
+
+@njit(cache=True, inline="always")
 def _excitation_value(kind, par, tab_t, tab_v, t0, t1, t):
     if kind == 0:  # half-sine: fmax, tau, t0
         s = t - par[2]
@@ -98,9 +124,7 @@ def rhs(
         rvy = y[V + 2 * i + 1] - y[V + 2 * j + 1]
         ddelta = rvx * nx + rvy * ny
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i] + radius[j] * y[OM + j]
-        gam = pG[c] * math.sqrt(math.sqrt(delta))
-        fn = pA[c] * delta * math.sqrt(delta) + gam * ddelta
-        ft = -mu * abs(fn) * math.tanh(k_s * vt)
+        fn, ft, gam = contact_law(pA[c], pG[c], delta, ddelta, vt, mu, k_s)
         fx = -fn * nx + ft * tx
         fy = -fn * ny + ft * ty
         dy[V + 2 * i] += fx
@@ -124,22 +148,10 @@ def rhs(
         delta = radius[i] - h
         if delta <= 0.0:
             continue
-        nx = -wall_n[w, 0]
-        ny = -wall_n[w, 1]
-        tx = -ny
-        ty = nx
-        rvx = y[V + 2 * i]
-        rvy = y[V + 2 * i + 1]
-        ddelta = rvx * nx + rvy * ny
-        vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
-        gam = wG[c] * math.sqrt(math.sqrt(delta))
-        fn = wA[c] * delta * math.sqrt(delta) + gam * ddelta
-        ft = -mu * abs(fn) * math.tanh(k_s * vt)
-        dy[V + 2 * i] += -fn * nx + ft * tx
-        dy[V + 2 * i + 1] += -fn * ny + ft * ty
-        dy[OM + i] += radius[i] * ft
-        p_visc += gam * ddelta * ddelta
-        p_fric -= ft * vt
+        pv, pf = _one_sided(dy, i, V, OM, -wall_n[w, 0], -wall_n[w, 1], delta, y[V + 2 * i], y[V + 2 * i + 1],
+                            radius[i], y[OM + i], wA[c], wG[c], mu, k_s)
+        p_visc += pv
+        p_fric += pf
     # granule-solid contact points (moving, fixed normal)
     for c in range(sg.shape[0]):
         i = sg[c]
@@ -149,24 +161,14 @@ def rhs(
         wy = sv0[c, 1] + sa[c, 1] * tau
         nx = sn[c, 0]
         ny = sn[c, 1]
-        tx = -ny
-        ty = nx
         gap = (sp[c, 0] + ux - y[P + 2 * i]) * nx + (sp[c, 1] + uy - y[P + 2 * i + 1]) * ny
         delta = radius[i] - gap
         if delta <= 0.0:
             continue
-        rvx = y[V + 2 * i] - wx
-        rvy = y[V + 2 * i + 1] - wy
-        ddelta = rvx * nx + rvy * ny
-        vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
-        gam = sG[c] * math.sqrt(math.sqrt(delta))
-        fn = sA[c] * delta * math.sqrt(delta) + gam * ddelta
-        ft = -mu * abs(fn) * math.tanh(k_s * vt)
-        dy[V + 2 * i] += -fn * nx + ft * tx
-        dy[V + 2 * i + 1] += -fn * ny + ft * ty
-        dy[OM + i] += radius[i] * ft
-        p_visc += gam * ddelta * ddelta
-        p_fric -= ft * vt
+        pv, pf = _one_sided(dy, i, V, OM, nx, ny, delta, y[V + 2 * i] - wx, y[V + 2 * i + 1] - wy,
+                            radius[i], y[OM + i], sA[c], sG[c], mu, k_s)
+        p_visc += pv
+        p_fric += pf
     # applied forces
     p_in = 0.0
     for e in range(eg.shape[0]):
@@ -279,8 +281,7 @@ def solid_contact_state(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, su, sv):
         if delta <= 0.0:
             continue
         ddelta = rvx * nx + rvy * ny
-        fn = sA[c] * delta * math.sqrt(delta) + sG[c] * math.sqrt(math.sqrt(delta)) * ddelta
-        ft = -mu * abs(fn) * math.tanh(k_s * vt)
+        fn, ft, _ = contact_law(sA[c], sG[c], delta, ddelta, vt, mu, k_s)
         force[c, 0] = fn * nx - ft * tx
         force[c, 1] = fn * ny - ft * ty
         normal[c] = abs(fn)
