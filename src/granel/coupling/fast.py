@@ -119,6 +119,30 @@ def contact_forces_jacobian(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, u, w):
     return F, normal, vrel, Du, Dw
 
 
+@njit(cache=True)
+def _local_friction_root(muN, k_s, vt, beta, sj):
+    """Root s of g(s) = s - muN tanh(k_s (vt - beta (s - sj))), increasing in s, in [-muN, muN]."""
+    lo = -muN
+    hi = muN
+    s = 0.5 * (lo + hi)
+    for _ in range(100):
+        arg = k_s * (vt - beta * (s - sj))
+        th = math.tanh(arg)
+        g = s - muN * th
+        if g > 0.0:
+            hi = s
+        else:
+            lo = s
+        dg = 1.0 + muN * k_s * beta * (1.0 - th * th)
+        s_new = s - g / dg
+        if s_new <= lo or s_new >= hi:
+            s_new = 0.5 * (lo + hi)
+        if abs(s_new - s) <= 1e-14 * muN:
+            return s_new
+        s = s_new
+    return s
+
+
 @njit(cache=True, fastmath=True)
 def _matvec(A, x, out):
     for r in range(A.shape[0]):
@@ -244,6 +268,25 @@ def fast_advance(
             for c in range(nc):
                 F[c, 0] += dF[2 * c]
                 F[c, 1] += dF[2 * c + 1]
+            # stiff friction: where the contact's local friction map is not contractive
+            # (mu k_s |N| beta > 1, the paper's |lambda| > 1), Newton's linear model overshoots
+            # the saturating tanh; there take the tangential force from the exact root of the
+            # local map s = mu |N| tanh(k_s (v_t - beta (s - s_j))) (monotone, bracketed)
+            for c in range(nc):
+                if normal[c] <= 0.0:
+                    continue
+                tx = -sn[c, 1]
+                ty = sn[c, 0]
+                ctt = tx * (C[2 * c, 2 * c] * tx + C[2 * c, 2 * c + 1] * ty) + ty * (C[2 * c + 1, 2 * c] * tx + C[2 * c + 1, 2 * c + 1] * ty)
+                beta = 0.5 * dt * ctt
+                muN = mu * normal[c]
+                if muN * k_s * beta <= 1.0:
+                    continue
+                sj = (F[c, 0] - dF[2 * c]) * tx + (F[c, 1] - dF[2 * c + 1]) * ty
+                root = _local_friction_root(muN, k_s, vrel[c], beta, sj)
+                snew = F[c, 0] * tx + F[c, 1] * ty
+                F[c, 0] += (root - snew) * tx
+                F[c, 1] += (root - snew) * ty
         finite = True
         for k in range(y.shape[0]):
             if not math.isfinite(ytr[k]):
