@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -14,7 +13,6 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from rich.table import Table
 
 from . import scenario as S
-from .units import parse_time
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, help="granel: granular-elastic solid interface simulator")
 console = Console(stderr=True)
@@ -26,24 +24,15 @@ def _fail(msg: str, code: int = 2):
 
 
 def _overrides(solid, excite, shock, fmax, duration, dt, output_every, solver, sets) -> list[str]:
-    ov = []
-    if solid:
-        ov.append(f'solid.kind="{solid}"')
-    if excite:
-        ov.append(f'excitations.0.granule="{excite}"')
+    """The CLI shortcuts as `key=value` scenario overrides (string values quoted for TOML)."""
+    quoted = {"solid.kind": solid, "excitations.0.granule": excite, "excitations.0.shock": shock,
+              "simulation.duration": duration, "simulation.dt": dt, "simulation.output_every": output_every,
+              "simulation.solver": solver}
+    ov = [f'{key}="{val}"' for key, val in quoted.items() if val]
     if shock:
-        ov.append(f'excitations.0.shock="{shock}"')
-        ov.append("excitations.0.fmax=nan")  # cleared below
+        ov.append("excitations.0.fmax=nan")  # a named shock replaces an explicit fmax (see load_scenario)
     if fmax is not None:
         ov.append(f"excitations.0.fmax={fmax}")
-    if duration:
-        ov.append(f'simulation.duration="{duration}"')
-    if dt:
-        ov.append(f'simulation.dt="{dt}"')
-    if output_every:
-        ov.append(f'simulation.output_every="{output_every}"')
-    if solver:
-        ov.append(f'simulation.solver="{solver}"')
     return ov + list(sets or [])
 
 

@@ -16,7 +16,7 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
 from .analysis.modal import accumulated_modal_energy, modal_coordinates, modal_energies, time_averaged_accumulation  # noqa: E402
-from .analysis.reciprocity import directed_velocity, excitation_of, toward_solid  # noqa: E402
+from .analysis.reciprocity import directed_velocity, excitation_of  # noqa: E402
 
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
 
@@ -201,6 +201,13 @@ def fig5_energy_density(runs: dict, out, t_left=2e-4, t_right=5e-5):
     return save_both(fig, out)
 
 
+def _energy_panel_labels(ax, title):
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("time [ms]")
+    ax.set_ylabel("energy / input [%]")
+    ax.legend(fontsize=8)
+
+
 def fig7_modal_accumulation(runs: dict, out, counts=(6, 100, 1000), modes=None):
     """Fig. 7: accumulated modal energy of the leading 6, 100, 1000 plate modes vs time, strong."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
@@ -214,10 +221,7 @@ def fig7_modal_accumulation(runs: dict, out, counts=(6, 100, 1000), modes=None):
         ax.plot(t * 1e3, 100 * E.sum(axis=1) / win, "k", lw=1.5, label="total")
         for n, y in accumulated_modal_energy(E, counts).items():
             ax.plot(t * 1e3, 100 * y / win, label=f"{n} modes")
-        ax.set_title(f"({letter}) plate, strong, {SIDE_NAME[exc]}", fontsize=9)
-        ax.set_xlabel("time [ms]")
-        ax.set_ylabel("energy / input [%]")
-        ax.legend(fontsize=8)
+        _energy_panel_labels(ax, f"({letter}) plate, strong, {SIDE_NAME[exc]}")
     fig.tight_layout()
     return save_both(fig, out)
 
@@ -234,10 +238,7 @@ def fig8_solid_partition(runs: dict, out):
         ax.plot(t, 100 * ds["energy_solid"].values / w, "k", label="total")
         ax.plot(t, 100 * ds["energy_solid_potential"].values / w, "C0", label="potential (elastic)")
         ax.plot(t, 100 * ds["energy_solid_kinetic"].values / w, "C3", label="kinetic")
-        ax.set_title(f"({letter}) plate, strong, {SIDE_NAME[exc]}", fontsize=9)
-        ax.set_xlabel("time [ms]")
-        ax.set_ylabel("energy / input [%]")
-        ax.legend(fontsize=8)
+        _energy_panel_labels(ax, f"({letter}) plate, strong, {SIDE_NAME[exc]}")
     fig.tight_layout()
     return save_both(fig, out)
 

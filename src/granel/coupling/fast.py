@@ -84,8 +84,7 @@ def contact_forces_jacobian(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, u, w):
         i = sg[c]
         nx, ny = sn[c, 0], sn[c, 1]
         tx, ty = -ny, nx
-        gap = (sp[c, 0] + u[c, 0] - y[2 * i]) * nx + (sp[c, 1] + u[c, 1] - y[2 * i + 1]) * ny
-        delta = radius[i] - gap
+        delta = kernels.point_overlap(y, i, c, radius, sp, sn, u[c, 0], u[c, 1])
         rvx = y[V + 2 * i] - w[c, 0]
         rvy = y[V + 2 * i + 1] - w[c, 1]
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]

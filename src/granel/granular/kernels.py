@@ -26,6 +26,33 @@ ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
+def pair_overlap(y, i, j, radius):
+    """(dx, dy, distance, overlap delta) of granules i and j (positions at the start of y)."""
+    dx = y[2 * j] - y[2 * i]
+    dyy = y[2 * j + 1] - y[2 * i + 1]
+    dist = math.sqrt(dx * dx + dyy * dyy)
+    return dx, dyy, dist, radius[i] + radius[j] - dist
+
+
+@njit(cache=True, inline="always")
+def wall_overlap(y, i, w, radius, wall_p0, wall_dir, wall_len, wall_n):
+    """Overlap of granule i with wall segment w; -1 when its centre projects outside the segment."""
+    rx = y[2 * i] - wall_p0[w, 0]
+    ry = y[2 * i + 1] - wall_p0[w, 1]
+    along = rx * wall_dir[w, 0] + ry * wall_dir[w, 1]
+    if along < 0.0 or along > wall_len[w]:
+        return -1.0
+    return radius[i] - (rx * wall_n[w, 0] + ry * wall_n[w, 1])
+
+
+@njit(cache=True, inline="always")
+def point_overlap(y, i, c, radius, sp, sn, ux, uy):
+    """Overlap of granule i with the flat solid contact point c displaced by (ux, uy)."""
+    gap = (sp[c, 0] + ux - y[2 * i]) * sn[c, 0] + (sp[c, 1] + uy - y[2 * i + 1]) * sn[c, 1]
+    return radius[i] - gap
+
+
+@njit(cache=True, inline="always")
 def contact_law(A, G, delta, ddelta, vt, mu, k_s):
     """Eqs. (2), (3), (5): normal force magnitude fn (repulsive > 0), tangential force ft along
     t, and the damping coefficient gamma, for overlap delta > 0, overlap rate ddelta and relative
@@ -110,10 +137,7 @@ def rhs(
     for c in range(pi_.shape[0]):
         i = pi_[c]
         j = pj_[c]
-        dx = y[P + 2 * j] - y[P + 2 * i]
-        dyy = y[P + 2 * j + 1] - y[P + 2 * i + 1]
-        dist = math.sqrt(dx * dx + dyy * dyy)
-        delta = radius[i] + radius[j] - dist
+        dx, dyy, dist, delta = pair_overlap(y, i, j, radius)
         if delta <= 0.0:
             continue
         nx = dx / dist
@@ -139,13 +163,7 @@ def rhs(
     for c in range(wg.shape[0]):
         i = wg[c]
         w = ww[c]
-        rx = y[P + 2 * i] - wall_p0[w, 0]
-        ry = y[P + 2 * i + 1] - wall_p0[w, 1]
-        along = rx * wall_dir[w, 0] + ry * wall_dir[w, 1]
-        if along < 0.0 or along > wall_len[w]:
-            continue
-        h = rx * wall_n[w, 0] + ry * wall_n[w, 1]
-        delta = radius[i] - h
+        delta = wall_overlap(y, i, w, radius, wall_p0, wall_dir, wall_len, wall_n)
         if delta <= 0.0:
             continue
         pv, pf = _one_sided(dy, i, V, OM, -wall_n[w, 0], -wall_n[w, 1], delta, y[V + 2 * i], y[V + 2 * i + 1],
@@ -159,13 +177,10 @@ def rhs(
         uy = su0[c, 1] + sv0[c, 1] * tau + 0.5 * sa[c, 1] * tau * tau
         wx = sv0[c, 0] + sa[c, 0] * tau
         wy = sv0[c, 1] + sa[c, 1] * tau
-        nx = sn[c, 0]
-        ny = sn[c, 1]
-        gap = (sp[c, 0] + ux - y[P + 2 * i]) * nx + (sp[c, 1] + uy - y[P + 2 * i + 1]) * ny
-        delta = radius[i] - gap
+        delta = point_overlap(y, i, c, radius, sp, sn, ux, uy)
         if delta <= 0.0:
             continue
-        pv, pf = _one_sided(dy, i, V, OM, nx, ny, delta, y[V + 2 * i] - wx, y[V + 2 * i + 1] - wy,
+        pv, pf = _one_sided(dy, i, V, OM, sn[c, 0], sn[c, 1], delta, y[V + 2 * i] - wx, y[V + 2 * i + 1] - wy,
                             radius[i], y[OM + i], sA[c], sG[c], mu, k_s)
         p_visc += pv
         p_fric += pf
@@ -271,8 +286,7 @@ def solid_contact_state(y, n, radius, mu, k_s, sg, sp, sn, sA, sG, su, sv):
         ny = sn[c, 1]
         tx = -ny
         ty = nx
-        gap = (sp[c, 0] + su[c, 0] - y[2 * i]) * nx + (sp[c, 1] + su[c, 1] - y[2 * i + 1]) * ny
-        delta = radius[i] - gap
+        delta = point_overlap(y, i, c, radius, sp, sn, su[c, 0], su[c, 1])
         rvx = y[V + 2 * i] - sv[c, 0]
         rvy = y[V + 2 * i + 1] - sv[c, 1]
         vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
@@ -296,7 +310,6 @@ def granule_energies(
 ):
     """Per-granule energy of eq. (11): kinetic, rotational and the contact potential share
     (1/5 A delta^(5/2) per granule-granule contact, 2/5 per wall or solid contact)."""
-    P = 0
     V = 3 * n
     OM = 5 * n
     kin = np.empty(n)
@@ -308,9 +321,7 @@ def granule_energies(
     for c in range(pi_.shape[0]):
         i = pi_[c]
         j = pj_[c]
-        dx = y[P + 2 * j] - y[P + 2 * i]
-        dyy = y[P + 2 * j + 1] - y[P + 2 * i + 1]
-        delta = radius[i] + radius[j] - math.sqrt(dx * dx + dyy * dyy)
+        delta = pair_overlap(y, i, j, radius)[3]
         if delta > 0.0:
             e = 0.2 * pA[c] * delta * delta * math.sqrt(delta)
             pot[i] += e
@@ -318,18 +329,12 @@ def granule_energies(
     for c in range(wg.shape[0]):
         i = wg[c]
         w = ww[c]
-        rx = y[P + 2 * i] - wall_p0[w, 0]
-        ry = y[P + 2 * i + 1] - wall_p0[w, 1]
-        along = rx * wall_dir[w, 0] + ry * wall_dir[w, 1]
-        if along < 0.0 or along > wall_len[w]:
-            continue
-        delta = radius[i] - (rx * wall_n[w, 0] + ry * wall_n[w, 1])
+        delta = wall_overlap(y, i, w, radius, wall_p0, wall_dir, wall_len, wall_n)
         if delta > 0.0:
             pot[i] += 0.4 * wA[c] * delta * delta * math.sqrt(delta)
     for c in range(sg.shape[0]):
         i = sg[c]
-        gap = (sp[c, 0] + su[c, 0] - y[P + 2 * i]) * sn[c, 0] + (sp[c, 1] + su[c, 1] - y[P + 2 * i + 1]) * sn[c, 1]
-        delta = radius[i] - gap
+        delta = point_overlap(y, i, c, radius, sp, sn, su[c, 0], su[c, 1])
         if delta > 0.0:
             pot[i] += 0.4 * sA[c] * delta * delta * math.sqrt(delta)
     return kin, rot, pot
@@ -341,14 +346,11 @@ def friction_rate(y, n, radius, mass, inertia, mu, k_s, pi_, pj_, pA, pG, wg, ww
     """The largest decay rate of relative sliding in the tanh law's viscous regime,
     mu k_s |N| / m_eff with 1/m_eff = sum 1/m + R^2/I over the bodies in contact [1/s].
     RK4 on that mode is stable for rate * dt < 2.78."""
-    P = 0
     rate = 0.0
     for c in range(pi_.shape[0]):
         i = pi_[c]
         j = pj_[c]
-        dx = y[P + 2 * j] - y[P + 2 * i]
-        dyy = y[P + 2 * j + 1] - y[P + 2 * i + 1]
-        delta = radius[i] + radius[j] - math.sqrt(dx * dx + dyy * dyy)
+        delta = pair_overlap(y, i, j, radius)[3]
         if delta > 0.0:
             inv = 1.0 / mass[i] + 1.0 / mass[j] + radius[i] ** 2 / inertia[i] + radius[j] ** 2 / inertia[j]
             r = mu * k_s * pA[c] * delta * math.sqrt(delta) * inv
@@ -357,17 +359,14 @@ def friction_rate(y, n, radius, mass, inertia, mu, k_s, pi_, pj_, pA, pG, wg, ww
     for c in range(wg.shape[0]):
         i = wg[c]
         w = ww[c]
-        rx = y[P + 2 * i] - wall_p0[w, 0]
-        ry = y[P + 2 * i + 1] - wall_p0[w, 1]
-        delta = radius[i] - (rx * wall_n[w, 0] + ry * wall_n[w, 1])
+        delta = wall_overlap(y, i, w, radius, wall_p0, wall_dir, wall_len, wall_n)
         if delta > 0.0:
             r = mu * k_s * wA[c] * delta * math.sqrt(delta) * (1.0 / mass[i] + radius[i] ** 2 / inertia[i])
             if r > rate:
                 rate = r
     for c in range(sg.shape[0]):
         i = sg[c]
-        gap = (sp[c, 0] + su[c, 0] - y[P + 2 * i]) * sn[c, 0] + (sp[c, 1] + su[c, 1] - y[P + 2 * i + 1]) * sn[c, 1]
-        delta = radius[i] - gap
+        delta = point_overlap(y, i, c, radius, sp, sn, su[c, 0], su[c, 1])
         if delta > 0.0:
             r = mu * k_s * sA[c] * delta * math.sqrt(delta) * (1.0 / mass[i] + radius[i] ** 2 / inertia[i])
             if r > rate:

@@ -15,7 +15,6 @@ from scipy.spatial import cKDTree
 
 from ..excitation import KIND_CODES, LoadHistory
 from ..materials import (
-    Material,
     damping_coefficient,
     effective_mass,
     effective_modulus,
