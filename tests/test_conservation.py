@@ -117,3 +117,39 @@ def test_stiff_friction_is_substepped():
     plain = Stepper(system)  # no sub-steps
     plain.advance(state, 4e-8, 750)
     assert abs(state.dissipated_viscous + state.dissipated_friction + plain.medium_energy(state).sum() - state.input_work) > 1e-5 * w
+
+
+@pytest.mark.parametrize("granule, speed", [("LSGM:3", 1.0), ("SSGM:C", 0.3)])
+def test_outer_wall_bounce_is_elastic_when_undamped(granule, speed):
+    """The paper's outer wall (MODEL.md sec. 1: rigid, E* = E/(1-nu^2), R* = R, m* = m): the shocked
+    granule thrown outward at it, with damping and friction off, bounces back with its speed, keeps
+    its energy through the contact, and reaches the Hertz overlap of a rigid flat."""
+    raw, _ = S.load_raw("paper")
+    raw["contact"].update(alpha_n=0.0, mu=0.0)
+    raw["solid"]["kind"] = "rigid"
+    raw["excitations"] = []
+    system0 = S.build_granular(S.validate(raw))[0]
+    side = 1.0 if system0.index(granule) < 14 else -1.0  # LSGM is left of the solid: outward is -x
+    raw["initial_velocities"] = [{"granule": granule, "v": [-side * speed, 0.0]}]
+    system, state, _ = S.build_granular(S.validate(raw))
+    g = system.index(granule)
+    wall = next(w for w in system.walls if w.name == f"{granule.split(':')[0]}:outer")
+    R, m = system.radius[g], system.mass[g]
+    A = 4 / 3 * 200e9 / (1 - 0.3**2) * np.sqrt(R)
+    dmax = (5 * m * speed**2 / (4 * A)) ** 0.4
+    tc = 2.94328 * dmax / speed
+    stepper = Stepper(system)
+    e0 = sum(x.sum() for x in stepper.energies(state))
+    overlap = lambda: R - side * (state.pos[g, 0] - wall.p0[0])  # noqa: E731
+    peak, energies, dt = 0.0, [], tc / 4000
+    for _ in range(6000):
+        stepper.advance(state, dt, 1)
+        d = overlap()
+        peak = max(peak, d)
+        energies.append(sum(x.sum() for x in stepper.energies(state)))
+        if peak > 0 and d < 0:
+            break
+    assert peak == pytest.approx(dmax, rel=1e-6)  # measured 4e-11
+    assert np.abs(np.array(energies) - e0).max() < 1e-9 * e0  # measured 1.7e-10
+    assert side * state.vel[g, 0] == pytest.approx(speed, rel=1e-9)  # back toward the solid; measured 3e-11
+    assert state.t == pytest.approx(tc, rel=2e-3)

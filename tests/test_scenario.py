@@ -37,6 +37,15 @@ def test_paper_scenario_geometry(paper_raw):
     assert walls["LSGM:top"].p0[1] == pytest.approx(0.1)
     assert walls["SSGM:bottom"].p0[1] == pytest.approx(0.025)
     assert walls["SSGM:top"].p0[1] == pytest.approx(0.075)
+    # three rigid walls per medium (MODEL.md sec. 1): the outer ones touch granules 1..5 and A..E
+    assert len(system.walls) == 6
+    lo, so = walls["LSGM:outer"], walls["SSGM:outer"]
+    assert lo.p0[0] == lo.p1[0] == pytest.approx(-2 * R - 2 * R * math.sqrt(3), abs=1e-15)
+    assert so.p0[0] == so.p1[0] == pytest.approx(0.01 + 2 * r + 2 * r * math.sqrt(3), abs=1e-15)
+    assert lo.normal == (1.0, 0.0) and so.normal == (-1.0, 0.0)  # pointing into the media
+    assert sorted((lo.p0[1], lo.p1[1])) == pytest.approx([0.0, 0.1]) and sorted((so.p0[1], so.p1[1])) == pytest.approx([0.025, 0.075])
+    free = S.build_granular(S.validate(S.apply_overrides(paper_raw, ["media.0.outer_wall=false", "media.1.outer_wall=false"])))[0]
+    assert sorted(w.name for w in free.walls) == ["LSGM:bottom", "LSGM:top", "SSGM:bottom", "SSGM:top"]
     assert [c.name for c in system.solid_contacts] == [f"LSGM:{k}" for k in range(10, 15)] + [f"SSGM:{k}" for k in "JKLMN"]
     assert system.excitations[0].granule == lab.index("LSGM:3")
     assert system.excitations[0].direction == (1.0, 0.0)

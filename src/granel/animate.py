@@ -1,9 +1,27 @@
-"""Animations (Appendix C): magnified deformation or normalised energy density, as MP4
-(imageio-ffmpeg) with a GIF fallback."""
+"""Animations (Appendix C): magnified deformation or normalised energy density, eq. (14), as MP4
+(imageio-ffmpeg) with a GIF fallback.
+
+A movie is rendered in three stages:
+
+1. `plan_frames` computes everything each frame shows, up front and vectorised where it can be:
+   the solid's reduced state at every frame time at once (q = Phi eta as one matrix product for
+   modal results, or the stored q for results of the paper's solver), the magnified granule and
+   mesh positions, and for eq. (14) the energy densities of granules and solid elements, with one
+   granular `Stepper` whose neighbour list is rebuilt only when granules have moved.
+2. `MovieFigure` builds the figure and its artists once (granules as one circle collection, the
+   plate as one polygon collection, the beam as a line or a quad mesh, the title) and only updates
+   their data from frame to frame.
+3. `animate` streams the frames straight to the encoder; `render_movies` renders many movies in
+   parallel worker processes.
+"""
 
 from __future__ import annotations
 
+import time
 import tomllib
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -11,11 +29,18 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.collections import PatchCollection  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
 
-# the paper's magnification of the deformation movies
+# the paper's magnification of the deformation movies (Appendix C)
 MAGNIFICATION = {"weak": 5000.0, "moderate": 1000.0, "strong": 200.0}
+FIELDS = ("deformation", "energy-density")
+# colour scale of the energy-density movies: w / w0 of eq. (14) on a log scale
+W_MIN, W_MAX = 1e-6, 1.0
+CMAP = "inferno"
+# x264 speed preset: at the same constant quality (quality=7, CRF 15) 'veryfast' takes about half the
+# encoder time of the default 'medium' for a file about 3 % larger
+X264_PRESET = "veryfast"
+# corner, mid-side, corner, ... around a Q8 element (as plots._element_outlines)
+_Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]
 
 
 def default_magnification(ds) -> float:
@@ -30,48 +55,116 @@ def frame_indices(n: int, max_frames: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, max_frames)).round().astype(int))
 
 
-def _canvas_frame(fig) -> np.ndarray:
-    fig.canvas.draw()
-    return np.asarray(fig.canvas.buffer_rgba())[:, :, :3].copy()
+def _check_field(field: str) -> None:
+    if field not in FIELDS:
+        raise ValueError(f"field must be 'deformation' or 'energy-density', got {field!r}")
 
 
-def write_movie(frames: list[np.ndarray], out: Path, fps: int) -> Path:
-    """MP4 through imageio-ffmpeg; a GIF next to it if that fails (or if `out` ends in .gif)."""
-    import imageio.v2 as imageio
+# --------------------------------------------------------------------------------------------
+# 1. what every frame shows
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    if out.suffix.lower() != ".gif":
-        try:
-            with imageio.get_writer(out, fps=fps, codec="libx264", quality=7, macro_block_size=16) as w:
-                for f in frames:
-                    w.append_data(f)
-            return out
-        except Exception:  # noqa: BLE001 - any ffmpeg problem: fall back to GIF
-            if out.exists():
-                out.unlink()
-            out = out.with_suffix(".gif")
-    imageio.mimsave(out, frames, duration=1.0 / fps, loop=0)
+
+_MODES_CACHE: dict = {}
+
+
+def _modes_of(ds, model):
+    """All modes of the solid (cached per process for the last scenario seen: the deformation and
+    energy-density movies of one run share them)."""
+    from .coupling.fast import all_modes
+
+    key = ds.attrs["scenario"]
+    if key not in _MODES_CACHE:
+        _MODES_CACHE.clear()
+        _MODES_CACHE[key] = all_modes(model)
+    return _MODES_CACHE[key]
+
+
+def solid_states(ds, times: np.ndarray, modes=None) -> tuple[np.ndarray, np.ndarray]:
+    """The solid's reduced (q, v), shape (len(times), ndof) each, at the stored solid times
+    nearest to `times` (the rule of figures.solid_state_at, for all times at once)."""
+    st = ds["solid_time"].values
+    k = np.abs(st[None, :] - np.asarray(times, float)[:, None]).argmin(axis=1)
+    if "solid_x" in ds:
+        return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float)
+    if modes is None:
+        from .figures import model_of
+
+        modes = _modes_of(ds, model_of(ds)[2])
+    phi = modes.shapes
+    eta = ds["solid_eta"].values[k].astype(float)
+    eta_dot = ds["solid_eta_dot"].values[k].astype(float)
+    return (phi @ eta.T).T, (phi @ eta_dot.T).T
+
+
+def granule_states(ds, idx: np.ndarray) -> np.ndarray:
+    """The granular state vectors y (see granular.kernels) at output indices idx: (len(idx), 6n+3)."""
+    x, y = ds["x"].values[idx], ds["y"].values[idx]
+    n = x.shape[1]
+    Y = np.zeros((len(idx), 6 * n + 3))
+    Y[:, 0 : 2 * n : 2] = x
+    Y[:, 1 : 2 * n : 2] = y
+    Y[:, 2 * n : 3 * n] = ds["theta"].values[idx]
+    Y[:, 3 * n : 5 * n : 2] = ds["v_x"].values[idx]
+    Y[:, 3 * n + 1 : 5 * n : 2] = ds["v_y"].values[idx]
+    Y[:, 5 * n : 6 * n] = ds["omega"].values[idx]
+    return Y
+
+
+def granule_energies(system, Y: np.ndarray, SU: np.ndarray | None = None) -> np.ndarray:
+    """Per-granule energy (kinetic + rotational + contact-potential share, eq. 11) for each state
+    row of Y, with contact points displaced by SU[f] (nc, 2). One Stepper serves all frames; its
+    neighbour list is rebuilt only when a granule has moved by half the skin since the last build,
+    so it always holds every touching pair, in the order a fresh list would (the energies equal
+    those of figures.granule_energies_at)."""
+    from .granular.system import GranularState, Stepper, build_neighbours
+
+    n = system.n
+    st = Stepper(system)
+    limit = 0.5 * system.skin / np.sqrt(2.0)
+    out = np.empty((len(Y), n))
+    for f, y in enumerate(Y):
+        pos = y[: 2 * n].reshape(-1, 2)
+        if np.max(np.abs(pos - st.nl.ref_pos), initial=0.0) >= limit:
+            st.nl = build_neighbours(system, pos.copy())
+        kin, rot, pot = st.energies(GranularState(y, 0.0), None if SU is None else SU[f])
+        out[f] = kin + rot + pot
     return out
 
 
-def animate(ds, out, field: str = "deformation", magnification: float | None = None, max_frames: int = 120,
-            fps: int = 20) -> Path:
-    """Render one movie of a result Dataset; returns the written path (.mp4 or .gif)."""
-    from .figures import draw_energy_density, model_of, solid_state_at
-    from .plots import draw_plate
+@dataclass
+class FramePlan:
+    """Everything the frames of one movie show, precomputed (F frames, n granules)."""
 
-    if field not in ("deformation", "energy-density"):
-        raise ValueError(f"field must be 'deformation' or 'energy-density', got {field!r}")
-    out = Path(out)
-    sc, system, model = model_of(ds)
-    times = ds["time"].values
-    idx = frame_indices(len(times), max_frames)
-    mag = magnification or default_magnification(ds)
-    modes = None
-    if "solid_eta" in ds:
-        from .coupling.fast import all_modes
+    field: str
+    times: np.ndarray  # (F,) frame times [s]
+    radius: np.ndarray  # (n,) granule radii [m]
+    centres: np.ndarray  # (F, n, 2) granule centres as drawn (magnified for deformation)
+    xlim: tuple[float, float]
+    ylim: tuple[float, float]
+    magnification: float | None = None
+    solid_kind: str = "rigid"  # plate | beam | rigid (no solid drawn)
+    granule_w: np.ndarray | None = None  # (F, n) w / w0, clipped at W_MIN (energy density)
+    plate_verts: np.ndarray | None = None  # (F, ne, 8, 2) magnified deformed element outlines
+    plate_w: np.ndarray | None = None  # (F, ne) element w / w0, clipped
+    beam_x: np.ndarray | None = None  # (F, nn) deformed centre line x (deformation)
+    beam_y: np.ndarray | None = None  # (nn,) node heights
+    beam_edges: tuple | None = None  # (x edges (nx+1,), y edges (ne+1,)) of the energy grid
+    beam_w: np.ndarray | None = None  # (F, ne, nx) w / w0 across the width, clipped
+    model: object = None  # the SolidModel (draws the plate's initial outline)
 
-        modes = all_modes(model)
+    @property
+    def frames(self) -> int:
+        return len(self.times)
+
+    def title(self, i: int) -> str:
+        t = float(self.times[i]) * 1e3
+        if self.field == "deformation":
+            return f"deformation x{self.magnification:g}, t = {t:.3f} ms"
+        return f"normalised energy density, t = {t:.3f} ms"
+
+
+def _limits(ds, system, model) -> tuple[list[float], list[float]]:
+    """Fixed axis limits covering the granules' initial positions and the solid."""
     x0, y0 = ds["x"].values[0], ds["y"].values[0]
     rmax = float(system.radius.max())
     xlim = [float(x0.min()) - 1.5 * rmax, float(x0.max()) + 1.5 * rmax]
@@ -79,37 +172,402 @@ def animate(ds, out, field: str = "deformation", magnification: float | None = N
     if model.nodes is not None:
         xlim = [min(xlim[0], model.nodes[:, 0].min()), max(xlim[1], model.nodes[:, 0].max())]
         ylim = [min(ylim[0], model.nodes[:, 1].min() - 0.05 * rmax), max(ylim[1], model.nodes[:, 1].max() + 0.05 * rmax)]
-    frames = []
-    fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=100)
-    if field == "energy-density":
-        from matplotlib.cm import ScalarMappable
+    return xlim, ylim
+
+
+def plan_frames(ds, field: str = "deformation", magnification: float | None = None, max_frames: int = 120) -> FramePlan:
+    """Precompute the frames of an Appendix C movie of `ds`: the magnified deformation, or the
+    normalised energy density w / w0 of eq. (14) (granules and solid elements)."""
+    from .figures import model_of
+
+    _check_field(field)
+    sc, system, model = model_of(ds)
+    times_all = ds["time"].values
+    idx = frame_indices(len(times_all), max_frames)
+    times = times_all[idx].astype(float)
+    xlim, ylim = _limits(ds, system, model)
+    has_solid = model.kind in ("plate", "beam") and "solid_time" in ds
+    modes = _modes_of(ds, model) if has_solid and "solid_x" not in ds else None
+    X, Yp = ds["x"].values[idx], ds["y"].values[idx]
+    plan = FramePlan(field, times, np.asarray(system.radius, float), np.stack([X, Yp], axis=-1), tuple(xlim), tuple(ylim),
+                     solid_kind=model.kind if has_solid else "rigid", model=model)
+    if field == "deformation":
+        mag = magnification or default_magnification(ds)
+        plan.magnification = mag
+        x0, y0 = ds["x"].values[0], ds["y"].values[0]
+        plan.centres = np.stack([x0 + mag * (X - x0), y0 + mag * (Yp - y0)], axis=-1)
+        if has_solid:
+            Q, _ = solid_states(ds, times, modes)
+            U = np.stack([model.full_displacement(q) for q in Q])  # (F, nn, 2)
+            if model.kind == "plate":
+                plan.plate_verts = (model.nodes[None] + mag * U)[:, model.elements[:, _Q8_OUTLINE]]
+            else:
+                plan.beam_x = model.nodes[None, :, 0] + mag * U[:, :, 0]
+                plan.beam_y = model.nodes[:, 1].copy()
+        return plan
+
+    # energy density, eq. (14): w / w0 with w0 the excited granule's peak kinetic energy density
+    from .analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+
+    w0 = excited_reference(ds)
+    SU = None
+    if has_solid:
+        Q, V = solid_states(ds, times, modes)
+        B = model.contact_map()
+        SU = np.ascontiguousarray((B @ Q.T).T).reshape(len(times), -1, 2)  # C order, as the kernel was compiled for
+        if model.kind == "plate":
+            plan.plate_w = np.clip(np.stack([solid_energy_density(model, q, v) for q, v in zip(Q, V)]) / w0, W_MIN, None)
+        else:
+            grids = [beam_energy_density_grid(model, q, v) for q, v in zip(Q, V)]
+            xs, ys, _ = grids[0]
+            plan.beam_edges = (np.linspace(xs[0], xs[-1], len(xs) + 1), ys)
+            plan.beam_w = np.clip(np.stack([g[2] for g in grids]) / w0, W_MIN, None)
+    e = granule_energies(system, granule_states(ds, idx), SU)
+    plan.granule_w = np.clip(e / (4 / 3 * np.pi * system.radius**3) / w0, W_MIN, None)
+    return plan
+
+
+# --------------------------------------------------------------------------------------------
+# 2. the figure, built once
+
+
+class MovieFigure:
+    """The figure of one movie: artists built once from a FramePlan, then `show(i)` updates them
+    to frame i and `rgb()` renders the canvas."""
+
+    def __init__(self, plan: FramePlan, figsize=(6.4, 6.4), dpi=100):
+        from matplotlib.collections import EllipseCollection
         from matplotlib.colors import LogNorm
 
-        fig.colorbar(ScalarMappable(norm=LogNorm(1e-6, 1.0), cmap="inferno"), ax=ax, shrink=0.8,
-                     label="normalised energy density w / w0, eq. (14)")
-    for k in idx:
-        ax.clear()
-        t = float(times[k])
-        if field == "deformation":
-            xs = x0 + mag * (ds["x"].values[k] - x0)
-            ys = y0 + mag * (ds["y"].values[k] - y0)
-            ax.add_collection(PatchCollection([Circle((a, b), r) for a, b, r in zip(xs, ys, system.radius)],
-                                              facecolor="#9db4d6", edgecolor="k", linewidth=0.5))
-            if model.kind != "rigid" and "solid_time" in ds:
-                q, _, _ = solid_state_at(ds, t, modes)
-                u = model.full_displacement(q)
-                if model.kind == "plate":
-                    draw_plate(ax, model, u, mag, color="C3", lw=0.25)
-                else:
-                    ax.plot(model.nodes[:, 0] + mag * u[:, 0], model.nodes[:, 1], "C3-", lw=2)
-            ax.set_title(f"deformation x{mag:g}, t = {t * 1e3:.3f} ms", fontsize=9)
-        else:
-            draw_energy_density(ax, ds, t, modes=modes)
-            ax.set_title(f"normalised energy density, t = {t * 1e3:.3f} ms", fontsize=9)
+        from . import figures  # noqa: F401 - the figures' rcParams (font size, grid)
+        from .plots import draw_plate
+
+        self.plan = plan
+        self.fig, self.ax = fig, ax = plt.subplots(figsize=figsize, dpi=dpi)
+        energy = plan.field == "energy-density"
+        self.norm = LogNorm(W_MIN, W_MAX) if energy else None
+        if energy:
+            from matplotlib.cm import ScalarMappable
+
+            fig.colorbar(ScalarMappable(norm=LogNorm(W_MIN, W_MAX), cmap=CMAP), ax=ax, shrink=0.8,
+                         label="normalised energy density w / w0, eq. (14)")
+        d = 2.0 * plan.radius
+        style = dict(cmap=CMAP, norm=self.norm, edgecolor="0.5", linewidth=0.3) if energy else \
+            dict(facecolor="#9db4d6", edgecolor="k", linewidth=0.5)
+        self.granules = EllipseCollection(d, d, np.zeros_like(d), units="xy", offsets=plan.centres[0],
+                                          offset_transform=ax.transData, **style)
+        if energy:
+            self.granules.set_array(plan.granule_w[0])
+        ax.add_collection(self.granules)
+        self.solid = None
+        if plan.solid_kind == "plate":
+            if energy:
+                self.solid = draw_plate(ax, plan.model, field=plan.plate_w[0], cmap=CMAP, color="none", lw=0)
+                self.solid.set_norm(self.norm)
+            else:
+                self.solid = draw_plate(ax, plan.model, color="C3", lw=0.25)
+                self.solid.set_verts(plan.plate_verts[0])
+        elif plan.solid_kind == "beam":
+            if energy:
+                xe, ye = plan.beam_edges
+                self.solid = ax.pcolormesh(xe, ye, plan.beam_w[0], cmap=CMAP, norm=self.norm, shading="flat")
+            else:
+                (self.solid,) = ax.plot(plan.beam_x[0], plan.beam_y, "C3-", lw=2)
+        if energy:
+            ax.set_xticks([])
+            ax.set_yticks([])
+        self.title = ax.set_title(plan.title(0), fontsize=9)
         ax.set_aspect("equal")
-        ax.autoscale_view()
-        ax.set_xlim(*xlim)
-        ax.set_ylim(*ylim)
-        frames.append(_canvas_frame(fig))
-    plt.close(fig)
-    return write_movie(frames, out, fps)
+        ax.set_xlim(*plan.xlim)
+        ax.set_ylim(*plan.ylim)
+        self.show(0)
+        self._prepare_blit()
+
+    def show(self, i: int) -> None:
+        """Set every artist to frame i."""
+        p = self.plan
+        self.granules.set_offsets(p.centres[i])
+        if p.field == "energy-density":
+            self.granules.set_array(p.granule_w[i])
+            if p.solid_kind == "plate":
+                self.solid.set_array(p.plate_w[i])
+            elif p.solid_kind == "beam":
+                self.solid.set_array(p.beam_w[i])
+        elif p.solid_kind == "plate":
+            self.solid.set_verts(p.plate_verts[i])
+        elif p.solid_kind == "beam":
+            self.solid.set_xdata(p.beam_x[i])
+        self.title.set_text(p.title(i))
+
+    def _prepare_blit(self) -> None:
+        """Render the static part of the figure once (axes, ticks, labels, colour bar) and note the
+        artists to redraw on top of it per frame, in the order Axes.draw would draw them: the
+        moving artists, the grid lines over them (zorder 1.5), the beam line (2), the spines (2.5)
+        and the title (3). Tick marks and labels lie outside the axes box, where nothing moves."""
+        ax, canvas = self.ax, self.fig.canvas
+        moving = [a for a in (self.granules, self.solid) if a is not None]
+        spines = list(ax.spines.values()) if ax.axison and ax.get_frame_on() else []
+        over = sorted(moving + spines + [self.title], key=lambda a: a.zorder)  # stable: insertion order
+        canvas.draw()  # creates and places the ticks
+        grid = []
+        if ax.axison:
+            for axis in (ax.xaxis, ax.yaxis):
+                lo, hi = sorted(axis.get_view_interval())
+                tol = 1e-10 * (hi - lo)
+                grid += [t.gridline for t in axis.get_major_ticks() + axis.get_minor_ticks()
+                         if t.gridline.get_visible() and lo - tol <= t.get_loc() <= hi + tol]
+        for a in over:
+            a.set_animated(True)
+        for g in grid:
+            g.set_visible(False)
+        canvas.draw()
+        self._background = canvas.copy_from_bbox(self.fig.bbox)
+        for g in grid:
+            g.set_visible(True)
+        z_grid = ax.xaxis.get_zorder()
+        below = [a for a in over if a.zorder <= z_grid]
+        self._layers = below + grid + [a for a in over if a.zorder > z_grid]
+
+    def rgb(self, blit: bool = True) -> np.ndarray:
+        """The figure as an RGB array: the static background restored and the moving artists drawn
+        over it (blit=True), or a full redraw (blit=False; the same pixels, slower)."""
+        canvas = self.fig.canvas
+        if not blit:
+            animated = [a for a in self._layers if a.get_animated()]
+            for a in animated:
+                a.set_animated(False)
+            canvas.draw()
+            for a in animated:
+                a.set_animated(True)
+        else:
+            canvas.restore_region(self._background)
+            for a in self._layers:
+                self.ax.draw_artist(a)
+        return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+
+    def close(self) -> None:
+        plt.close(self.fig)
+
+
+def iter_frames(plan: FramePlan) -> Iterator[np.ndarray]:
+    """The RGB frames of a plan, one at a time (the figure is built once)."""
+    mf = MovieFigure(plan)
+    try:
+        for i in range(plan.frames):
+            mf.show(i)
+            yield mf.rgb()
+    finally:
+        mf.close()
+
+
+# --------------------------------------------------------------------------------------------
+# 3. encoding
+
+
+class _EncoderFailed(Exception):
+    """The MP4 encoder (not the rendering) failed."""
+
+
+def _stream_mp4(out: Path, frames: Iterator[np.ndarray], fps: int) -> None:
+    import imageio.v2 as imageio
+
+    try:
+        w = imageio.get_writer(out, fps=fps, codec="libx264", quality=7, macro_block_size=16,
+                               output_params=["-preset", X264_PRESET])
+    except Exception as e:  # noqa: BLE001 - no ffmpeg, no libx264, ...
+        raise _EncoderFailed(str(e)) from e
+    try:
+        for f in frames:  # an error while rendering propagates as itself
+            try:
+                w.append_data(f)
+            except Exception as e:  # noqa: BLE001
+                raise _EncoderFailed(str(e)) from e
+    except BaseException:
+        try:
+            w.close()
+        except Exception:  # noqa: BLE001 - the first error is the one to report
+            pass
+        raise
+    try:
+        w.close()
+    except Exception as e:  # noqa: BLE001
+        raise _EncoderFailed(str(e)) from e
+
+
+def write_movie(frames: Callable[[], Iterator[np.ndarray]] | Sequence[np.ndarray], out, fps: int) -> Path:
+    """Stream frames to an MP4 through imageio-ffmpeg (libx264); a GIF next to it if the encoder
+    fails (or if `out` ends in .gif). `frames` is an iterable of RGB arrays or, so that a failed
+    MP4 can be re-rendered as GIF without keeping the frames, a callable returning a fresh iterator."""
+    import imageio.v2 as imageio
+
+    make = frames if callable(frames) else (lambda: iter(frames))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix.lower() != ".gif":
+        try:
+            _stream_mp4(out, make(), fps)
+            return out
+        except _EncoderFailed:
+            out.unlink(missing_ok=True)
+            out = out.with_suffix(".gif")
+        except BaseException:
+            out.unlink(missing_ok=True)
+            raise
+    with imageio.get_writer(out, mode="I", duration=1000.0 / fps, loop=0) as w:  # duration in ms
+        for f in make():
+            w.append_data(f)
+    return out
+
+
+def animate(ds, out, field: str = "deformation", magnification: float | None = None, max_frames: int = 120,
+            fps: int = 20) -> Path:
+    """Render one Appendix C movie of a result Dataset: the deformation magnified (x5000 / x1000 /
+    x200 for weak / moderate / strong shocks unless `magnification` is given) or the normalised
+    energy density w / w0 of eq. (14) on a log colour scale [1e-6, 1]. Returns the written path
+    (.mp4, or .gif if the MP4 encoder is unavailable)."""
+    _check_field(field)
+    plan = plan_frames(ds, field, magnification, max_frames)
+    return write_movie(lambda: iter_frames(plan), Path(out), fps)
+
+
+# --------------------------------------------------------------------------------------------
+# many movies in parallel
+
+
+@dataclass(frozen=True)
+class MovieJob:
+    """One movie to render: a result NetCDF file and animate()'s arguments."""
+
+    result: Path
+    out: Path
+    field: str = "deformation"
+    magnification: float | None = None
+    max_frames: int = 120
+    fps: int = 20
+
+    @classmethod
+    def of(cls, job) -> "MovieJob":
+        """From a MovieJob, a tuple (result, out, field, magnification, max_frames, fps) (trailing
+        items optional) or a dict with those keys (`nc`/`path` for result, `output` for out and
+        `frames` for max_frames also accepted)."""
+        if isinstance(job, MovieJob):
+            return job
+        if isinstance(job, dict):
+            d = dict(job)
+            alias = {"nc": "result", "path": "result", "output": "out", "frames": "max_frames"}
+            d = {alias.get(k, k): v for k, v in d.items()}
+            unknown = set(d) - set(cls.__dataclass_fields__)
+            if unknown:
+                raise ValueError(f"movie job {job!r}: unknown keys {sorted(unknown)}")
+        else:
+            names = list(cls.__dataclass_fields__)
+            if not 2 <= len(job) <= len(names):
+                raise ValueError(f"movie job {job!r}: expected (result, out[, field, magnification, max_frames, fps])")
+            d = dict(zip(names, job))
+        d["result"], d["out"] = Path(d["result"]), Path(d["out"])
+        return cls(**d)
+
+
+class MovieError(RuntimeError):
+    """One or more movies of render_movies failed; `failures` maps output path -> message."""
+
+    def __init__(self, failures: dict):
+        self.failures = failures
+        lines = [f"{len(failures)} movie(s) failed:"] + [f"--- {out}:\n{msg}" for out, msg in failures.items()]
+        super().__init__("\n".join(lines))
+
+
+def _render_group(jobs: list[MovieJob]) -> list[tuple[bool, str, float]]:
+    """Render jobs sharing one result file (read once): [(ok, path or error text, seconds)]."""
+    from .results import read_netcdf
+
+    res = []
+    try:
+        ds = read_netcdf(jobs[0].result)
+    except Exception as e:  # noqa: BLE001 - reported per job
+        msg = f"{jobs[0].result}: cannot read: {type(e).__name__}: {e}"
+        return [(False, f"{j.out.name}: {msg}", 0.0) for j in jobs]
+    for j in jobs:
+        t0 = time.perf_counter()
+        try:
+            p = animate(ds, j.out, j.field, j.magnification, j.max_frames, j.fps)
+            res.append((True, str(p), time.perf_counter() - t0))
+        except Exception as e:  # noqa: BLE001 - reported per job
+            res.append((False, f"{j.out.name} (from {j.result}): {type(e).__name__}: {e}\n{traceback.format_exc()}",
+                        time.perf_counter() - t0))
+    return res
+
+
+def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | None = None) -> list[Path]:
+    """Render many Appendix C movies (e.g. the 24 of `granel paper`: 4 cases x 3 shock levels x 2
+    fields, the magnified deformation and the energy density of eq. 14) and return their paths in
+    job order.
+
+    jobs: MovieJobs, tuples (result .nc, output, field, magnification, max_frames, fps) or dicts
+    (see MovieJob.of). Jobs on one result file run together in one task, so that the file is read
+    and the solid model built once (unless there are fewer files than workers: then one task per
+    movie). workers > 1 renders in that many worker processes of a 'spawn' context (numba and
+    forked threads do not mix; as with any spawn pool, a script calling this must guard its entry
+    point with `if __name__ == "__main__":`); workers = 1 renders serially in this process.
+    progress(path) is called as each movie is written. If a movie fails the others are still
+    rendered, then MovieError names every failed output with its error."""
+    jobs = [MovieJob.of(j) for j in jobs]
+    for j in jobs:
+        try:
+            _check_field(j.field)
+        except ValueError as e:
+            raise ValueError(f"movie {j.out.name}: {e}") from None
+    if not jobs:
+        return []
+    groups: dict[Path, list[int]] = {}
+    for k, j in enumerate(jobs):
+        groups.setdefault(j.result.resolve(), []).append(k)
+    tasks = list(groups.values())
+    if len(tasks) < workers:  # too few files to keep every worker busy
+        tasks = [[k] for k in range(len(jobs))]
+
+    def cost(t):  # longest first: movies x file size (plate results are the big, slow ones)
+        r = jobs[t[0]].result
+        return len(t), r.stat().st_size if r.exists() else 0
+
+    tasks.sort(key=cost, reverse=True)
+    results: dict[int, tuple[bool, str, float]] = {}
+
+    def done(t, res):
+        for k, r in zip(t, res):
+            results[k] = r
+            if progress and r[0]:
+                progress(Path(r[1]))
+
+    if workers <= 1 or len(tasks) == 1:
+        for t in tasks:
+            done(t, _render_group([jobs[k] for k in t]))
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=mp.get_context("spawn")) as ex:
+            futures = {ex.submit(_render_group, [jobs[k] for k in t]): t for t in tasks}
+            for fu in as_completed(futures):
+                t = futures[fu]
+                try:
+                    done(t, fu.result())
+                except Exception as e:  # noqa: BLE001 - e.g. a worker died
+                    done(t, [(False, f"{jobs[k].out.name}: worker failed: {type(e).__name__}: {e}", 0.0) for k in t])
+    failures = {str(jobs[k].out): results[k][1] for k in range(len(jobs)) if not results[k][0]}
+    if failures:
+        raise MovieError(failures)
+    return [Path(results[k][1]) for k in range(len(jobs))]
+
+
+def paper_movie_jobs(results: dict, out_dir, max_frames: int = 120, fps: int = 20) -> list[MovieJob]:
+    """The Appendix C movie jobs for result files keyed by case tag (e.g. 'plate-SSGMC-strong'):
+    both fields of each, the deformation at the paper's magnification of its shock level."""
+    out_dir = Path(out_dir)
+    return [MovieJob(Path(p), out_dir / f"{tag}-{f}.mp4", f, None, max_frames, fps)
+            for tag, p in results.items() for f in FIELDS]
+
+
+__all__ = ["MAGNIFICATION", "FIELDS", "FramePlan", "MovieFigure", "MovieJob", "MovieError", "animate", "default_magnification",
+           "frame_indices", "granule_energies", "iter_frames", "paper_movie_jobs", "plan_frames", "render_movies",
+           "solid_states", "write_movie"]

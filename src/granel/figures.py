@@ -67,32 +67,47 @@ def solid_state_at(ds, time: float, modes=None):
     return modes.shapes @ ds["solid_eta"].values[k].astype(float), modes.shapes @ ds["solid_eta_dot"].values[k].astype(float), k
 
 
-def fig3_velocities(fwd, bwd, out):
-    """Fig. 3: (a) the shock; (b) v_3C (granule 3 when C is shocked) and v_C3."""
-    A, dA = excitation_of(fwd)
-    B, dB = excitation_of(bwd)
-    sc = scenario_of(fwd)
-    e = sc["excitations"][0]
+def fig3_velocities(fwd, bwd, out, window=(4e-4, 8e-4)):
+    """Fig. 3: (a) the shock; (b) v_3C (granule 3 when C is shocked) and v_C3; (c) their amplitude
+    spectra over `window` (the text's "lower frequency content for v_3C ... especially for
+    tau > 0.6 ms"), with the dominant frequencies marked."""
+    from .analysis.signals import amplitude_spectrum, dominant_frequency
     from .excitation import SHOCK_LEVELS
 
+    A, dA = excitation_of(fwd)
+    B, dB = excitation_of(bwd)
+    e = scenario_of(fwd)["excitations"][0]
     fmax = e.get("fmax", SHOCK_LEVELS.get(e.get("shock", ""), np.nan))
     tau = e.get("tau", 1e-5)
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.2), gridspec_kw={"width_ratios": [1, 2]})
+    fig = plt.figure(figsize=(10, 6.4), layout="constrained")
+    gs = fig.add_gridspec(2, 2, width_ratios=[1, 1.6])
+    ax1, ax3, ax2 = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, :])
     tt = np.linspace(0, 2 * tau, 400)
     ax1.plot(tt * 1e3, np.where(tt <= tau, fmax * np.sin(np.pi * tt / tau), 0.0), "k")
     ax1.set_xlabel("time [ms]")
     ax1.set_ylabel("F [N]")
-    ax1.set_title(f"(a) half-sine shock, Fmax = {fmax:g} N")
-    s_f = directed_velocity(fwd, B, dB)
-    s_b = directed_velocity(bwd, A, dA)
+    ax1.set_title(f"(a) half-sine shock, Fmax = {fmax:g} N", fontsize=9)
     a_lab, b_lab = A.split(":")[1], B.split(":")[1]
-    # the free-edge granules are pushed outward by the arriving wave: plot the outward velocity
-    ax2.plot(fwd["time"].values * 1e3, -s_f, label=f"v_{b_lab}{a_lab}: granule {B} (shock on {A})")
-    ax2.plot(bwd["time"].values * 1e3, -s_b, label=f"v_{a_lab}{b_lab}: granule {A} (shock on {B})")
+    # the measured granules sit at the walled outer edge: plot the outward velocity
+    traces = ((fwd, -directed_velocity(fwd, B, dB), f"v_{b_lab}{a_lab}: granule {B} (shock on {A})"),
+              (bwd, -directed_velocity(bwd, A, dA), f"v_{a_lab}{b_lab}: granule {A} (shock on {B})"))
+    for k, (ds, v, label) in enumerate(traces):
+        t = ds["time"].values
+        ax2.plot(t * 1e3, v, color=f"C{k}", label=label)
+        f, S = amplitude_spectrum(t, v, window)
+        fd = dominant_frequency(t, v, window)
+        ax3.plot(f / 1e3, S, color=f"C{k}", label=f"{label.split(':')[0]}: dominant {fd / 1e3:.1f} kHz")
+        ax3.axvline(fd / 1e3, color=f"C{k}", lw=0.8, ls=":")
+    ax2.axvspan(window[0] * 1e3, window[1] * 1e3, color="0.9", zorder=0, label="window of (c)")
     ax2.set_xlabel("time [ms]")
-    ax2.set_ylabel("outward velocity (away from the solid) [m/s]")
-    ax2.set_title(f"(b) swapped excitation and measurement ({fwd.attrs.get('solid_kind', '')})")
+    ax2.set_ylabel("outward velocity [m/s]")
+    ax2.set_title(f"(b) swapped excitation and measurement ({fwd.attrs.get('solid_kind', '')})", fontsize=9)
     ax2.legend(fontsize=8)
+    ax3.set_xlim(0, 50)
+    ax3.set_xlabel("frequency [kHz]")
+    ax3.set_ylabel("amplitude [m/s]")
+    ax3.set_title(f"(c) spectra over {window[0] * 1e3:g}-{window[1] * 1e3:g} ms (Hann window)", fontsize=9)
+    ax3.legend(fontsize=8)
     return save_both(fig, out)
 
 
@@ -127,8 +142,30 @@ def fig4_energies(runs: dict, out):
             if r == 2:
                 ax.set_xlabel("time [ms]")
     axes[0, 0].legend(fontsize=7, ncol=2)
+    _fig4_inset(axes[2, 1], runs, colors["solid"])
     fig.tight_layout()
     return save_both(fig, out)
+
+
+def _fig4_inset(ax, runs, color, tmax=0.2):
+    """The inset of Fig. 4(f): the solid's energy, plate vs beam, strong shock on the SSGM,
+    over the primary wave (0 to `tmax` ms)."""
+    pair = [(runs.get((solid, "SSGM:C", "strong")), ls) for solid, ls in (("plate", "-"), ("beam", "--"))]
+    if any(ds is None for ds, _ in pair):
+        return None
+    ins = ax.inset_axes([0.5, 0.38, 0.47, 0.5])
+    top = 0.0
+    for ds, ls in pair:
+        t, curves = _energy_curves(ds)
+        sel = t <= tmax
+        ins.plot(t[sel], 100 * curves["solid"][sel], ls, color=color, lw=1.0)
+        top = max(top, 100 * curves["solid"][sel].max())
+    ins.set_xlim(0, tmax)
+    ins.set_xticks([0, tmax / 2, tmax])
+    ins.set_ylim(0, 1.15 * top if top > 0 else 1)
+    ins.set_title("solid: plate (-) vs beam (--)", fontsize=7)
+    ins.tick_params(labelsize=6)
+    return ins
 
 
 def granule_energies_at(ds, k: int, su=None):
@@ -183,22 +220,69 @@ def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=No
     return pc
 
 
-def fig5_energy_density(runs: dict, out, t_left=2e-4, t_right=5e-5):
-    """Fig. 5: normalised energy density snapshots, strong shock: (a, b) left at 0.2 ms, plate and
-    beam; (c, d) right at 0.05 ms."""
-    fig, axes = plt.subplots(1, 4, figsize=(12, 4.2))
-    panels = [("plate", "LSGM:3", t_left, "a"), ("beam", "LSGM:3", t_left, "b"), ("plate", "SSGM:C", t_right, "c"), ("beam", "SSGM:C", t_right, "d")]
-    pc = None
-    for ax, (solid, exc, t, letter) in zip(axes, panels):
-        ds = runs.get((solid, exc, "strong"))
+def snapshot_time(ds) -> float:
+    """The output time at which the solid's energy is largest: Fig. 5's snapshot instant ("when
+    the energy density in the elastic solid reaches its maximum")."""
+    return float(ds["time"].values[int(np.argmax(ds["energy_solid"].values))])
+
+
+def system_extent(ds, margin=0.15):
+    """(xlim, ylim) holding every granule, wall and the solid of a run, with a margin relative to
+    the largest radius: one frame for every panel of a figure."""
+    sc, system, model = model_of(ds)
+    x, y, r = system.pos0[:, 0], system.pos0[:, 1], system.radius
+    xs = [x.min() - r.max(), x.max() + r.max()] + [p for w in system.walls for p in (w.p0[0], w.p1[0])]
+    ys = [y.min() - r.max(), y.max() + r.max()] + [p for w in system.walls for p in (w.p0[1], w.p1[1])]
+    if model.nodes is not None:
+        xs += [model.nodes[:, 0].min(), model.nodes[:, 0].max()]
+        ys += [model.nodes[:, 1].min(), model.nodes[:, 1].max()]
+    pad = margin * r.max()
+    return (min(xs) - pad, max(xs) + pad), (min(ys) - pad, max(ys) + pad)
+
+
+def fig5_energy_density(runs: dict, out):
+    """Fig. 5: normalised energy density (14), strong shocks: (a, b) shock on the LSGM, plate and
+    beam; (c, d) shock on the SSGM. Each side is drawn at the instant of the plate's largest
+    solid energy (computed, printed in each title); the beam panel at the same instant, as in the
+    paper. One colour scale and one frame for all four panels."""
+    panels = [("plate", "LSGM:3", "a"), ("beam", "LSGM:3", "b"), ("plate", "SSGM:C", "c"), ("beam", "SSGM:C", "d")]
+    present = [runs.get((solid, exc, "strong")) for solid, exc, _ in panels]
+    ref = next((ds for ds in present if ds is not None), None)
+    if ref is None:
+        raise ValueError("Fig. 5 needs at least one strong-shock run")
+    xlim, ylim = system_extent(ref)
+    times = {}
+    for exc in ("LSGM:3", "SSGM:C"):
+        ds = runs.get(("plate", exc, "strong")) or runs.get(("beam", exc, "strong"))
+        if ds is not None:
+            times[exc] = snapshot_time(ds)
+    fig = plt.figure(figsize=(12, 4.4))
+    gs = fig.add_gridspec(1, 5, width_ratios=[1, 1, 1, 1, 0.06], wspace=0.08)
+    norm = LogNorm(1e-6, 1.0)
+    for k, ((solid, exc, letter), ds) in enumerate(zip(panels, present)):
+        ax = fig.add_subplot(gs[0, k])
         if ds is None:
             ax.set_visible(False)
             continue
-        pc = draw_energy_density(ax, ds, t)
-        ax.set_title(f"({letter}) {solid}, {exc}, t = {t * 1e3:.2f} ms", fontsize=8)
-    if pc is not None:
-        fig.colorbar(pc, ax=axes, shrink=0.8, label="normalised energy density w / w0")
+        t = times[exc]
+        draw_energy_density(ax, ds, t, norm=norm)
+        draw_walls(ax, ds)
+        ax.set_xlim(*xlim)
+        ax.set_ylim(*ylim)
+        ax.set_aspect("equal")
+        ax.set_title(f"({letter}) {solid}, shock on {exc}\nt = {t * 1e3:.3f} ms (plate's energy maximum)", fontsize=8)
+    from matplotlib.cm import ScalarMappable
+
+    fig.colorbar(ScalarMappable(norm=norm, cmap="inferno"), cax=fig.add_subplot(gs[0, 4]),
+                 label="normalised energy density w / w0, eq. (14)")
     return save_both(fig, out)
+
+
+def draw_walls(ax, ds, color="k", lw=2.0):
+    """The rigid walls of a run's granular media."""
+    system = model_of(ds)[1]
+    for w in system.walls:
+        ax.plot([w.p0[0], w.p1[0]], [w.p0[1], w.p1[1]], color=color, lw=lw, solid_capstyle="butt")
 
 
 def _energy_panel_labels(ax, title):
@@ -283,32 +367,28 @@ def fig10_friction_law(out, mu=0.099, k_s=100.0, N=1.0):
     return save_both(fig, out)
 
 
-def b1_adapted(lam, limit=0.5):
-    """The paper's (B1): lambda(dt0) / 2^n with the smallest n giving <= limit."""
-    lam = np.asarray(lam, float)
-    n = np.maximum(0, np.ceil(np.log2(np.maximum(lam, 1e-300) / limit)))
-    return lam / 2**n
-
-
-def fig11_eigenvalues(ds, out, tmax=2e-4, left=("LSGM:10", "LSGM:11", "LSGM:12"), right=("SSGM:J", "SSGM:K", "SSGM:L")):
-    """Fig. 11: |lambda| (A9) at the six tracked contacts, strong shock on C, plate. From a
-    paper-solver run these are the adapted values it used; from a fast-solver run, lambda at dt0
-    reduced by (B1) as the paper's algorithm would have."""
+def fig11_eigenvalues(ds, out, tmax=2e-4, source="", left=("LSGM:10", "LSGM:11", "LSGM:12"), right=("SSGM:J", "SSGM:K", "SSGM:L")):
+    """Fig. 11: |lambda| (A9) at the six tracked contacts, strong shock on C, plate, from a run of
+    the paper's algorithm: at every accepted step, the values at the common step that (B1) chose
+    for all contacts. `source` says where the run came from (printed under the title)."""
+    if ds.attrs.get("solver_name") != "paper":
+        raise ValueError("Fig. 11 needs a run of the paper's algorithm (simulation.solver = \"paper\")")
     t = ds["step_time"].values
     lam = ds["step_lambda"].values
     names = list(ds["contact"].values)
-    sel = t <= tmax
-    adapted = ds.attrs.get("solver_name") != "paper"
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharey=True)
+    sel = t <= tmax * (1 + 1e-9)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
     for ax, group, letter, side in zip(axes, (left, right), "ab", ("left", "right")):
         for name in group:
-            if name not in names:
-                continue
-            y = lam[sel, names.index(name)]
-            ax.plot(t[sel] * 1e3, b1_adapted(y) if adapted else y, lw=0.6, label=f"lambda_{name.split(':')[1]}")
-        ax.set_title(f"({letter}) contacts on the {side} edge", fontsize=9)
+            if name in names:
+                ax.plot(t[sel] * 1e3, lam[sel, names.index(name)], lw=0.6, label=f"lambda_{name.split(':')[1]}")
+        ax.axhline(0.5, color="0.4", lw=0.8, ls="--")
+        ax.set_title(f"({letter}) contacts on the {side} edge of the plate", fontsize=9)
         ax.set_xlabel("time [ms]")
         ax.legend(fontsize=8)
-    axes[0].set_ylabel("|lambda|")
+    axes[0].set_ylabel("|lambda| (A9)")
+    axes[0].set_ylim(0, 1.0)
+    fig.suptitle(f"paper's algorithm (A1-A9, B1): {int(sel.sum())} steps over 0-{tmax * 1e3:g} ms, smallest "
+                 f"{ds['step_dt'].values[sel].min():.3g} s" + (f"; {source}" if source else ""), fontsize=8)
     fig.tight_layout()
     return save_both(fig, out)

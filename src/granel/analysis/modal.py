@@ -46,13 +46,16 @@ def accumulated_modal_energy(E: np.ndarray, counts=(6, 100, 1000)) -> dict[int, 
     return {int(n): cum[:, min(n, E.shape[1]) - 1] for n in counts}
 
 
-def time_averaged_accumulation(E: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Eq. (16): sum_{n<=N} int E_n dt / int E dt, for N = 1..nm (Fig. 9)."""
+def time_averaged_shares(E: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Each mode's share of the time-integrated solid energy, int E_n dt / int E dt."""
     integ = np.trapezoid(E, t, axis=0)
     total = integ.sum()
-    if total <= 0:
-        return np.zeros(E.shape[1])
-    return np.cumsum(integ) / total
+    return integ / total if total > 0 else np.zeros(E.shape[1])
+
+
+def time_averaged_accumulation(E: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Eq. (16): sum_{n<=N} int E_n dt / int E dt, for N = 1..nm (Fig. 9)."""
+    return np.cumsum(time_averaged_shares(E, t))
 
 
 def modes_for_fraction(accumulation: np.ndarray, fraction: float) -> int:

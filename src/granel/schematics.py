@@ -1,0 +1,665 @@
+"""Schematics of the paper's Figs. 1 and 2, drawn from the model objects.
+
+Wang, Tawfick & Vakakis, Phys. Rev. E 104, 044906 (2021):
+
+* Fig. 1(b): the 2D planar model with its boundary conditions (clamped ends of the solid, rigid
+  walls of each granular medium, free lateral edges of the solid, shock sites);
+* Fig. 1(c): a granule-granule and a granule-solid contact with the unit normal n and the
+  tangent t = k x n, and the massless rigid layer (length R/10) bonded to the solid's edge;
+* Fig. 2: (a) the Euler-Bernoulli beam mesh with the contact forces applied at nodes, (b) the
+  Q8 plate mesh, (c)/(d) the rigid layer at an LSGM / SSGM contact.
+
+Nothing here is placed by hand: granules, walls, contact points and excitations come from the
+`GranularSystem` of the scenario, meshes and rigid layers from its `SolidModel`s. Drawings are
+in millimetres.
+
+Every artist that carries meaning is tagged with a gid ``"panel|kind|name"`` (for example
+``"a|wall|LSGM:outer"``), so that a drawing can be checked without looking at pixels; see
+`tagged`. The gids also appear in SVG output.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import PolyCollection  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
+
+MM = 1e3  # drawing unit: millimetres per metre
+
+# colours: one per medium, the solid, the boundary conditions
+MEDIUM_COLOURS = ["#8FB3D9", "#E8B08A", "#9CCB9C", "#D99A9A"]
+SOLID_COLOUR = "#C8C8C8"
+GROUND_COLOUR = "0.25"
+SHOCK_COLOUR = "#C0392B"
+SWAPPED_COLOUR = "#7D3C98"
+CONTACT_COLOUR = "#D62728"
+FREE_EDGE_COLOUR = "#1F77B4"
+LAYER_COLOUR = "#E67E22"
+
+Q8_PERIMETER = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
+
+
+# ------------------------------------------------------------------ tags and look-ups
+
+
+def _tag(artist, panel: str, kind: str, name: str = ""):
+    artist.set_gid(f"{panel}|{kind}|{name}")
+    return artist
+
+
+def tagged(fig, panel: str, kind: str) -> dict:
+    """The artists of `fig` tagged ``panel|kind|name``, keyed by name.
+
+    E.g. ``tagged(fig, "a", "wall")`` gives the rigid walls of Fig. 1(a) as Line2D objects
+    (data in mm); ``tagged(fig, "b", "elements")[""]`` is the plate mesh of Fig. 2(b).
+    """
+    out = {}
+    for a in fig.findobj(lambda a: isinstance(a.get_gid(), str) and a.get_gid().count("|") >= 2):
+        p, k, name = a.get_gid().split("|", 2)
+        if p == panel and k == kind:
+            out[name] = a
+    return out
+
+
+def _require_solid(sc) -> None:
+    if sc.solid is None:
+        raise ValueError(f"scenario {sc.name!r} has no solid ([solid] table): Figs. 1-2 draw a granular-solid "
+                         "interface; add a solid (kind = plate | beam | rigid)")
+
+
+def with_solid_kind(sc, kind: str):
+    """A copy of the scenario whose solid is of `kind` ('plate', 'beam' or 'rigid')."""
+    _require_solid(sc)
+    return sc.model_copy(update={"solid": sc.solid.model_copy(update={"kind": kind})})
+
+
+def _system(sc):
+    from .scenario import build_granular
+
+    system, _, _ = build_granular(sc, sc.base)
+    return system
+
+
+def _solid_model(sc, system, kind: str):
+    from .solid.build import build_solid
+
+    return build_solid(with_solid_kind(sc, kind), system)
+
+
+def _contact(model, name: str):
+    for c in model.contacts:
+        if c.name == name:
+            return c
+    raise KeyError(f"no contact {name!r} on the {model.kind}; contacts: {', '.join(c.name for c in model.contacts)}")
+
+
+# ------------------------------------------------------------------ geometry from the models
+
+
+@dataclass(frozen=True)
+class RigidLayer:
+    """The massless rigid layer of a plate contact (Sec. II B; Fig. 2(c)-(d)).
+
+    `nodes` are the plate nodes on the layer (sorted by height), `x` the edge abscissa and
+    `y_lo`, `y_hi` its ends [m]."""
+
+    name: str
+    nodes: np.ndarray
+    x: float
+    y_lo: float
+    y_hi: float
+
+    @property
+    def length(self) -> float:
+        return self.y_hi - self.y_lo
+
+    @property
+    def centre(self) -> float:
+        return 0.5 * (self.y_lo + self.y_hi)
+
+
+def rigid_layer(model, name: str) -> RigidLayer:
+    """Find the rigid layer of contact `name` from the plate's constraints: its nodes are those
+    that follow a unit translation u_x of the layer's driven (mid-node) DOF rigidly.
+
+    Without rigid layers (mesh.rigid_layers = false) only the contact node moves: length 0."""
+    if model.kind != "plate":
+        raise ValueError(f"rigid layers belong to the plate model, not to a {model.kind}")
+    c = _contact(model, name)
+    q = np.zeros(model.ndof)
+    q[c.dof_x] = 1.0
+    u = model.full_displacement(q)
+    nodes = np.flatnonzero(np.abs(u[:, 0] - 1.0) < 1e-12)
+    nodes = nodes[np.argsort(model.nodes[nodes, 1])]
+    ys = model.nodes[nodes, 1]
+    return RigidLayer(name, nodes, float(model.nodes[nodes[0], 0]), float(ys[0]), float(ys[-1]))
+
+
+def solid_box(sc, model) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1) of the solid [m]: the plate's node extents, the beam's node line
+    widened by its depth, or the scenario's rectangle for the rigid solid."""
+    if model.kind == "plate":
+        (x0, y0), (x1, y1) = model.nodes.min(axis=0), model.nodes.max(axis=0)
+    elif model.kind == "beam":
+        xm = float(model.nodes[0, 0])
+        half = 0.5 * model.info["width"]
+        x0, x1 = xm - half, xm + half
+        y0, y1 = float(model.nodes[:, 1].min()), float(model.nodes[:, 1].max())
+    else:
+        s = sc.solid
+        x0, y0, x1, y1 = s.x0, s.y0, s.x0 + s.width, s.y0 + s.length
+    return float(x0), float(y0), float(x1), float(y1)
+
+
+def central_contact(model, system, medium: str) -> str | None:
+    """The solid contact of `medium` nearest the middle of its contact column (the paper's
+    LSGM:12 and SSGM:L), or None if the medium does not touch the solid."""
+    names = [c.name for c in model.contacts if c.name.split(":")[0] == medium]
+    if not names:
+        return None
+    ys = np.array([_contact(model, n).position[1] for n in names])
+    return names[int(np.argmin(np.abs(ys - 0.5 * (ys.min() + ys.max()))))]
+
+
+def touching_partner(system, i: int) -> int:
+    """A granule touching granule i, preferring an oblique contact (largest |n_x n_y|, then
+    the upper one), as in the paper's Fig. 1(c)."""
+    d = system.pos0 - system.pos0[i]
+    dist = np.hypot(d[:, 0], d[:, 1])
+    touch = np.abs(dist - (system.radius + system.radius[i])) < 1e-9 * system.radius[i]
+    touch[i] = False
+    cands = np.flatnonzero(touch)
+    if not len(cands):
+        raise ValueError(f"granule {system.labels[i]} touches no other granule")
+    n = d[cands] / dist[cands, None]
+    score = np.round(np.abs(n[:, 0] * n[:, 1]), 9) + 1e-3 * n[:, 1]
+    return int(cands[np.argmax(score)])
+
+
+def unit_normal_tangent(n) -> tuple[np.ndarray, np.ndarray]:
+    """(n, t) with t = k x n: the tangent is n turned by +90 degrees (eq. 5)."""
+    n = np.asarray(n, float) / np.hypot(*n)
+    return n, np.array([-n[1], n[0]])
+
+
+def swapped_shock(sc, system):
+    """The paper's reciprocal excitation site (Fig. 3: shock on 3 vs on C).
+
+    With a single excitation on a medium beside the solid and another medium on the opposite
+    side, return (label, Excitation) for the mirror granule of the other medium (same column
+    counted from the solid, same offset from the medium's mid-height in radii), pushed toward
+    the solid; otherwise None."""
+    if len(sc.excitations) != 1:
+        return None
+    spec = sc.excitations[0]
+    sides = {m.name: m.side for m in sc.media}
+    medium, _ = spec.granule.split(":", 1)
+    others = [m for m, s in sides.items() if s in ("left", "right") and s != sides.get(medium)]
+    if sides.get(medium) not in ("left", "right") or len(others) != 1:
+        return None
+    g = system.index(spec.granule)
+    col, row = _lattice_place(sc, system, g)
+    best = None
+    for h in system.medium_members(others[0]):
+        c, r = _lattice_place(sc, system, h)
+        if c == col and abs(r - row) < 0.5:
+            best = h
+    if best is None:
+        return None
+    label = system.labels[best]
+    swapped = sc.model_copy(update={"excitations": [spec.model_copy(update={"granule": label})]})
+    return label, _system(swapped).excitations[0]
+
+
+def _lattice_place(sc, system, g: int) -> tuple[int, float]:
+    """(column counted from the solid, height offset from the medium's middle in radii)."""
+    s = sc.solid
+    members = np.flatnonzero(system.medium_index == system.medium_index[g])
+    side = {m.name: m.side for m in sc.media}[system.media[system.medium_index[g]]]
+    face = s.x0 if side == "left" else s.x0 + s.width
+    R = system.radius[g]
+    dist = np.abs(system.pos0[members, 0] - face)
+    col = int(round((abs(system.pos0[g, 0] - face) - dist.min()) / (R * np.sqrt(3.0))))
+    ym = 0.5 * (system.pos0[members, 1].min() + system.pos0[members, 1].max())
+    return col, float((system.pos0[g, 1] - ym) / R)
+
+
+# ------------------------------------------------------------------ drawing primitives
+
+
+def _clean(ax) -> None:
+    ax.set_aspect("equal")
+    ax.grid(False)
+    ax.tick_params(labelsize=8)
+
+
+def draw_ground(ax, p0, p1, outward, depth, panel, kind, name, colour=GROUND_COLOUR, lw=2.0):
+    """A clamped boundary: the line p0-p1 [mm] with a hatched band of `depth` on its `outward`
+    side. Returns the boundary line (tagged `kind`); the band is tagged `kind`-hatch."""
+    p0, p1, o = (np.asarray(v, float) for v in (p0, p1, outward))
+    band = np.array([p0, p1, p1 + depth * o, p0 + depth * o])
+    hatch = Polygon(band, closed=True, fc="none", ec=colour, lw=0, hatch="////")
+    ax.add_patch(_tag(hatch, panel, kind + "-hatch", name))
+    (line,) = ax.plot([p0[0], p1[0]], [p0[1], p1[1]], color=colour, lw=lw, solid_capstyle="butt")
+    return _tag(line, panel, kind, name)
+
+
+def draw_granules(ax, system, panel, members=None, fontsize=8, alpha=1.0, labels=True):
+    """Discs with their labels (the part after 'MEDIUM:'); labels tagged granule-label."""
+    members = range(system.n) if members is None else members
+    for g in members:
+        x, y = system.pos0[g] * MM
+        fc = MEDIUM_COLOURS[system.medium_index[g] % len(MEDIUM_COLOURS)]
+        ax.add_patch(_tag(Circle((x, y), system.radius[g] * MM, fc=fc, ec="k", lw=0.7, alpha=alpha),
+                          panel, "granule", system.labels[g]))
+        if labels:
+            small = fontsize * min(1.0, system.radius[g] / system.radius.max()) ** 0.3
+            _tag(ax.text(x, y, system.labels[g].split(":", 1)[1], ha="center", va="center", fontsize=small),
+                 panel, "granule-label", system.labels[g])
+
+
+def draw_arrow(ax, tail, head, colour, panel, kind, name, lw=1.6, ls="-", mutation_scale=12):
+    """An arrow from tail to head [mm] (an Annotation: .xy is the head, .xyann the tail)."""
+    ann = ax.annotate("", xy=tuple(head), xytext=tuple(tail),
+                      arrowprops=dict(arrowstyle="-|>", color=colour, lw=lw, ls=ls, shrinkA=0, shrinkB=0,
+                                      mutation_scale=mutation_scale))
+    return _tag(ann, panel, kind, name)
+
+
+def draw_dimension(ax, a, b, panel, name, colour="k"):
+    """A dimension line between a and b [mm] (arrows both ends), tagged layer-span."""
+    ann = ax.annotate("", xy=tuple(b), xytext=tuple(a),
+                      arrowprops=dict(arrowstyle="<|-|>", color=colour, lw=0.9, shrinkA=0, shrinkB=0,
+                                      mutation_scale=7))
+    return _tag(ann, panel, "layer-span", name)
+
+
+def _element_polygons(model, elements=None) -> list[np.ndarray]:
+    """Q8 element outlines [mm] through corner and mid-side nodes."""
+    elements = model.elements if elements is None else model.elements[elements]
+    return [model.nodes[e[Q8_PERIMETER]] * MM for e in elements]
+
+
+# ------------------------------------------------------------------ Fig. 1
+
+
+def draw_solid(ax, sc, model, panel, box=None):
+    """The elastic solid of Fig. 1(b): outline, clamped ends (hatched), free lateral edges."""
+    x0, y0, x1, y1 = np.array(box if box is not None else solid_box(sc, model)) * MM
+    ax.add_patch(_tag(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="k", lw=0.8,
+                                hatch="x" if model.kind == "rigid" else None), panel, "solid", model.kind))
+    if model.kind == "beam":
+        ym = model.nodes[:, 1] * MM
+        ax.plot(model.nodes[:, 0] * MM, ym, color="k", lw=0.8, ls="-.")
+    depth = 0.03 * (y1 - y0)
+    bottom, top = sc.solid.clamped
+    if bottom:
+        draw_ground(ax, (x0, y0), (x1, y0), (0, -1), depth, panel, "clamp", "bottom")
+    if top:
+        draw_ground(ax, (x0, y1), (x1, y1), (0, 1), depth, panel, "clamp", "top")
+    for name, x in (("left", x0), ("right", x1)):
+        (ln,) = ax.plot([x, x], [y0, y1], color=FREE_EDGE_COLOUR, lw=1.6, ls=(0, (4, 2)))
+        _tag(ln, panel, "free-edge", name)
+    return depth
+
+
+def draw_walls(ax, system, panel, depth, fontsize=7):
+    """Every rigid wall of the granular media as a hatched clamped boundary, named."""
+    for w in system.walls:
+        p0, p1 = np.asarray(w.p0) * MM, np.asarray(w.p1) * MM
+        out = -np.asarray(w.normal, float) / np.hypot(*w.normal)
+        draw_ground(ax, p0, p1, out, depth, panel, "wall", w.name)
+        mid = 0.5 * (p0 + p1) + (depth + 0.6 * depth) * out
+        vertical = abs(out[0]) > abs(out[1])
+        ha = ("right" if out[0] < 0 else "left") if vertical else "center"
+        va = "center" if vertical else ("top" if out[1] < 0 else "bottom")
+        _tag(ax.text(*mid, w.name, ha=ha, va=va, fontsize=fontsize, rotation=90 if vertical else 0,
+                     rotation_mode="anchor" if not vertical else "default"), panel, "wall-label", w.name)
+
+
+def draw_shock(ax, system, exc, colour, panel, text="F(t)", ls="-"):
+    """The shock F(t) on its granule: an arrow inside the disc along the force direction,
+    ending short of the centre (the granule touches a wall on the side the force comes from)."""
+    g = exc.granule
+    c, R = system.pos0[g] * MM, system.radius[g] * MM
+    d = np.asarray(exc.direction, float) / np.hypot(*exc.direction)
+    draw_arrow(ax, c - 0.92 * R * d, c - 0.3 * R * d, colour, panel, "shock", system.labels[g], lw=2.0, ls=ls)
+    _tag(ax.text(c[0], c[1] + 0.35 * R, text, color=colour, ha="center", va="bottom", fontsize=6.5,
+                 fontweight="bold"), panel, "shock-label", system.labels[g])
+
+
+def _panel_planar(ax, sc, system, model, swapped, zoom_box):
+    """Fig. 1(a) here (the paper's Fig. 1(b)): the planar model with boundary conditions."""
+    panel = "a"
+    x0, y0, x1, y1 = solid_box(sc, model)
+    depth = draw_solid(ax, sc, model, panel)
+    draw_walls(ax, system, panel, depth)
+    draw_granules(ax, system, panel)
+    xm = 0.5 * (x0 + x1) * MM
+    ax.text((0.7 * x0 + 0.3 * x1) * MM, (0.62 * y0 + 0.38 * y1) * MM, f"elastic solid ({model.kind})", rotation=90,
+            ha="center", va="bottom", fontsize=7, bbox=dict(fc=SOLID_COLOUR, ec="none", pad=0.5))
+    for c in system.solid_contacts:
+        (ln,) = ax.plot(*(np.asarray(c.point) * MM), "o", ms=3.5, color=CONTACT_COLOUR, mec="k", mew=0.4, zorder=5)
+        _tag(ln, panel, "solid-contact", c.name)
+    for e in system.excitations:
+        draw_shock(ax, system, e, SHOCK_COLOUR, panel)
+    if swapped is not None:
+        draw_shock(ax, system, swapped[1], SWAPPED_COLOUR, panel, ls="--")
+    for m in system.media:
+        members = system.medium_members(m)
+        top = max([max(w.p0[1], w.p1[1]) for w in system.walls if w.medium == m] or [system.pos0[members, 1].max()])
+        xc = system.pos0[members, 0].mean() * MM
+        R = system.radius[members].max() * MM
+        ax.text(xc, top * MM + 3.2 * depth, f"{m}  (R = {R:g} mm)", ha="center", va="bottom", fontsize=9,
+                fontweight="bold")
+    for side, ypos in (("bottom", y0), ("top", y1)):
+        if sc.solid.clamped[0 if side == "bottom" else 1]:
+            ax.text(xm, ypos * MM + (-1.6 if side == "bottom" else 1.6) * depth, "clamped", ha="center",
+                    va="top" if side == "bottom" else "bottom", fontsize=7)
+    zx0, zy0, zx1, zy1 = np.asarray(zoom_box) * MM
+    ax.add_patch(_tag(Rectangle((zx0, zy0), zx1 - zx0, zy1 - zy0, fc="none", ec="k", lw=0.7, ls=":"),
+                      panel, "zoom", "b"))
+    ax.text(zx0, zy1, "(b)", fontsize=7, ha="left", va="bottom")
+    handles = [
+        Line2D([], [], color=FREE_EDGE_COLOUR, lw=1.6, ls=(0, (4, 2)), label="free edge of the solid"),
+        Line2D([], [], ls="none", marker="o", ms=4, color=CONTACT_COLOUR, mec="k", mew=0.4,
+               label="granule-solid contact"),
+        Line2D([], [], color=SHOCK_COLOUR, lw=2, label=f"F(t) on {system.labels[system.excitations[0].granule]}"
+               if system.excitations else "F(t)"),
+    ]
+    if swapped is not None:
+        handles.append(Line2D([], [], color=SWAPPED_COLOUR, lw=2, ls="--",
+                              label=f"F(t) on {swapped[0]} (swapped case)"))
+    handles.append(Rectangle((0, 0), 1, 1, fc="none", ec=GROUND_COLOUR, hatch="////", lw=0,
+                             label="clamped / rigid wall"))
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, fontsize=7, frameon=False)
+    _clean(ax)
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title("(a) planar model and boundary conditions [cf. Fig. 1(b)]", fontsize=9)
+    ax.autoscale_view()
+    xl, yl = ax.get_xlim(), ax.get_ylim()
+    ax.set_xlim(xl[0] - 4, xl[1] + 4)
+    ax.set_ylim(yl[0] - 4, yl[1] + 4 * depth)
+
+
+def _closeup_box(system, i, j, model, sc):
+    """The window of Fig. 1(b) [m]: granules i and j, the whole width of the solid, and room
+    below for the rigid-layer inset."""
+    ij = [i, j]
+    lo = (system.pos0[ij] - system.radius[ij, None]).min(axis=0)
+    hi = (system.pos0[ij] + system.radius[ij, None]).max(axis=0)
+    x0, _, x1, _ = solid_box(sc, model)
+    margin = 0.3 * system.radius[i]
+    return (min(lo[0], x0) - margin, lo[1] - margin - 0.9 * system.radius[i],
+            max(hi[0], x1) + margin, hi[1] + margin)
+
+
+def _panel_contacts(ax, sc, system, model, plate, contact, box):
+    """Fig. 1(b) here (the paper's Fig. 1(c)): contact points with unit normal and tangent."""
+    panel = "b"
+    i = contact.granule
+    j = touching_partner(system, i)
+    draw_solid(ax, sc, model, panel)
+    draw_granules(ax, system, panel, [i, j], labels=False)
+    si, sj = system.pos0[i] * MM, system.pos0[j] * MM
+    Ri = system.radius[i] * MM
+    for g, role, centre in ((i, "i", si), (j, "j", sj)):
+        text = f"${role}$ = {system.labels[g].split(':', 1)[1]}"
+        _tag(ax.text(centre[0], centre[1] + 0.3 * system.radius[g] * MM, text, ha="center", va="bottom", fontsize=10),
+             panel, "granule-label", system.labels[g])
+    L = 0.6 * Ri
+    # granule-granule contact: n_ij from i to j, t_ij = k x n_ij
+    n, t = unit_normal_tangent(sj - si)
+    p = si + Ri * n
+    _unit_pair(ax, p, n, t, L, "ij", f"{system.labels[i]}-{system.labels[j]}", panel)
+    ax.plot(*p, "o", ms=3.5, color="k", zorder=6)
+    # granule-solid contact: n_ik from the model (granule -> solid), at the contact point
+    n, t = unit_normal_tangent(contact.normal)
+    p = np.asarray(contact.point) * MM
+    _unit_pair(ax, p, n, t, L, "ik", contact.name, panel)
+    (ln,) = ax.plot(*p, "o", ms=3.5, color=CONTACT_COLOUR, mec="k", mew=0.4, zorder=6)
+    _tag(ln, panel, "solid-contact", contact.name)
+    # k out of the plane, at the centre of granule i
+    ax.plot(*(si + np.array([0.0, -0.45 * Ri])), marker="o", ms=7, mfc="w", mec="k", mew=0.8)
+    ax.plot(*(si + np.array([0.0, -0.45 * Ri])), marker=".", ms=3, color="k")
+    ax.text(*(si + np.array([0.12 * Ri, -0.45 * Ri])), r"$\mathbf{k}$", fontsize=9, va="center")
+    layer = rigid_layer(plate, contact.name) if plate is not None else None
+    if layer is not None and layer.length > 0:
+        ax.plot([layer.x * MM] * 2, [layer.y_lo * MM, layer.y_hi * MM], color=LAYER_COLOUR, lw=3,
+                solid_capstyle="butt", zorder=5)
+        _layer_inset(ax, sc, system, model, contact, layer, panel)
+    _clean(ax)
+    ax.set_xlim(box[0] * MM, box[2] * MM)
+    ax.set_ylim(box[1] * MM, box[3] * MM)
+    ax.set_xlabel("x [mm]")
+    ax.set_title(f"(b) contacts {system.labels[i]}-{system.labels[j]} and {contact.name}-solid:\n"
+                 r"unit normal $\mathbf{n}$, tangent $\mathbf{t} = \mathbf{k}\times\mathbf{n}$ [cf. Fig. 1(c)]",
+                 fontsize=9)
+
+
+def _unit_pair(ax, p, n, t, L, sub, name, panel):
+    """Arrows n and t (length L [mm]) at the contact point p, labelled n_sub and t_sub."""
+    for vec, other, sym, kind, colour in ((n, t, "n", "normal", "k"), (t, n, "t", "tangent", "#2E86C1")):
+        draw_arrow(ax, p, p + L * vec, colour, panel, kind, name, lw=1.4)
+        q = p + 1.12 * L * vec
+        if abs(vec[0]) < 0.3:  # along y: beside the tip, away from the other arrow
+            q = q - 0.1 * L * np.sign(other[0]) * np.array([1.0, 0.0])
+            ha = "right" if other[0] > 0 else "left"
+        else:
+            ha = "left" if vec[0] > 0 else "right"
+        ax.text(*q, rf"$\mathbf{{{sym}}}_{{{sub}}}$", fontsize=10, color=colour, ha=ha,
+                va="bottom" if vec[1] > 0.3 else ("top" if vec[1] < -0.3 else "center"))
+
+
+def _layer_inset(ax, sc, system, model, contact, layer, panel):
+    """An inset zooming on the rigid layer of Fig. 1(c): length R/10 on the solid's edge."""
+    g = contact.granule
+    R = system.radius[g] * MM
+    Lm = layer.length * MM
+    c = np.array([layer.x * MM, layer.centre * MM])
+    side = -np.sign(contact.normal[0])  # granule side of the edge: -1 left, +1 right
+    ins = ax.inset_axes([0.03 if side < 0 else 0.55, 0.03, 0.42, 0.3])
+    h = 1.4 * Lm
+    ins.add_patch(Circle(system.pos0[g] * MM, R, fc=MEDIUM_COLOURS[system.medium_index[g] % 4], ec="k", lw=0.8))
+    x0, y0, x1, y1 = np.array(solid_box(sc, model)) * MM
+    ins.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="k", lw=0.8))
+    ins.plot([c[0]] * 2, [layer.y_lo * MM, layer.y_hi * MM], color=LAYER_COLOUR, lw=4, solid_capstyle="butt")
+    xd = c[0] + side * 0.45 * Lm
+    draw_dimension(ins, (xd, layer.y_lo * MM), (xd, layer.y_hi * MM), panel, contact.name)
+    ins.text(xd + side * 0.1 * Lm, c[1], f"rigid layer\nR/10 = {Lm:.2f} mm", fontsize=6.5, va="center",
+             ha="right" if side < 0 else "left")
+    ins.set_xlim(c[0] - 2.4 * h if side < 0 else c[0] - h, c[0] + h if side < 0 else c[0] + 2.4 * h)
+    ins.set_ylim(c[1] - h, c[1] + h)
+    ins.set_aspect("equal")
+    ins.set_xticks([])
+    ins.set_yticks([])
+    ax.indicate_inset_zoom(ins, edgecolor="0.3", lw=0.6)
+
+
+def figure1(sc):
+    """The paper's Fig. 1(b)-(c) as a matplotlib Figure: (a) the planar model, (b) a contact
+    close-up. Granules, walls, contacts and excitations come from the scenario's models."""
+    _require_solid(sc)
+    system = _system(sc)
+    model = _solid_model(sc, system, sc.solid.kind)
+    plate = model if model.kind == "plate" else _solid_model(sc, system, "plate")
+    swapped = swapped_shock(sc, system)
+    fig = plt.figure(figsize=(13.0, 7.2))
+    gs = fig.add_gridspec(1, 2, width_ratios=[1.45, 1.0], wspace=0.12)
+    ax_a, ax_b = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
+    contact = _closeup_contact(system)
+    if contact is None:
+        box = solid_box(sc, model)
+        _panel_planar(ax_a, sc, system, model, swapped, box)
+        ax_b.set_axis_off()
+        ax_b.text(0.5, 0.5, "no granule touches the solid", ha="center", transform=ax_b.transAxes)
+        return fig
+    i = contact.granule
+    box = _closeup_box(system, i, touching_partner(system, i), model, sc)
+    _panel_planar(ax_a, sc, system, model, swapped, box)
+    _panel_contacts(ax_b, sc, system, model, plate, contact, box)
+    return fig
+
+
+def _closeup_contact(system):
+    """The central solid contact of the first medium touching the solid (the paper's LSGM:12)."""
+    if not system.solid_contacts:
+        return None
+    first = system.medium_index[system.solid_contacts[0].granule]
+    cs = [c for c in system.solid_contacts if system.medium_index[c.granule] == first]
+    ys = np.array([c.point[1] for c in cs])
+    return cs[int(np.argmin(np.abs(ys - 0.5 * (ys.min() + ys.max()))))]
+
+
+def fig1_geometry(sc, out) -> list[Path]:
+    """Write the paper's Fig. 1(b)-(c) (planar model, contact close-up) to `out` as PNG and PDF."""
+    from .figures import save_both
+
+    return save_both(figure1(sc), out)
+
+
+# ------------------------------------------------------------------ Fig. 2
+
+
+def _panel_beam(ax, sc, system, beam):
+    """Fig. 2(a): the beam's nodes on its neutral axis; the contact forces act at nodes."""
+    panel = "a"
+    x0, y0, x1, y1 = np.array(solid_box(sc, beam)) * MM
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="0.5", lw=0.5))
+    xy = beam.nodes * MM
+    (ln,) = ax.plot(xy[:, 0], xy[:, 1], "-", color="k", lw=0.9)
+    (nd,) = ax.plot(xy[:, 0], xy[:, 1], "o", ms=2.2, color="k")
+    _tag(nd, panel, "beam-nodes")
+    depth = 0.03 * (y1 - y0)
+    for k, yy in ((0, y0), (1, y1)):
+        if sc.solid.clamped[k]:
+            draw_ground(ax, (x0, yy), (x1, yy), (0, -1 if k == 0 else 1), depth, panel, "clamp",
+                        "bottom" if k == 0 else "top")
+    w = x1 - x0
+    for c in beam.contacts:
+        node = int(np.argmin(np.abs(beam.nodes[:, 1] - c.position[1])))
+        xn, yn = xy[node]
+        s = np.sign(c.normal[0])  # +1: pushed from the left
+        (mk,) = ax.plot(xn - s * 0.22 * w, yn, ">" if s > 0 else "<", ms=5, color=CONTACT_COLOUR, mec="k", mew=0.3)
+        _tag(mk, panel, "beam-contact", c.name)
+        ax.annotate("", xy=(xn - s * 0.35 * w, yn), xytext=(xn - s * 1.2 * w, yn),
+                    arrowprops=dict(arrowstyle="-|>", color=CONTACT_COLOUR, lw=0.8, mutation_scale=7))
+        ax.text(xn - s * 1.3 * w, yn, c.name.split(":", 1)[1], fontsize=6.5, va="center",
+                ha="right" if s > 0 else "left")
+    _clean(ax)
+    ax.set_xlim(x0 - 1.9 * w, x1 + 1.9 * w)
+    ax.set_ylim(y0 - 2 * depth, y1 + 2 * depth)
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(f"(a) beam\n{beam.nelements} Hermite elements\n{beam.ndof} DOFs", fontsize=9)
+
+
+def _panel_plate(ax, sc, system, plate):
+    """Fig. 2(b): every Q8 element; the rigid layers on the edges; the clamped ends."""
+    panel = "b"
+    pc = PolyCollection(_element_polygons(plate), facecolors="none", edgecolors="k", linewidths=0.25)
+    ax.add_collection(_tag(pc, panel, "elements"))
+    x0, y0, x1, y1 = np.array(solid_box(sc, plate)) * MM
+    depth = 0.03 * (y1 - y0)
+    for k, yy in ((0, y0), (1, y1)):
+        if sc.solid.clamped[k]:
+            draw_ground(ax, (x0, yy), (x1, yy), (0, -1 if k == 0 else 1), depth, panel, "clamp",
+                        "bottom" if k == 0 else "top")
+    for c in plate.contacts:
+        lay = rigid_layer(plate, c.name)
+        (ln,) = ax.plot([lay.x * MM] * 2, [lay.y_lo * MM, lay.y_hi * MM], color=LAYER_COLOUR, lw=3,
+                        solid_capstyle="butt")
+        _tag(ln, panel, "layer", c.name)
+    w = x1 - x0
+    _clean(ax)
+    ax.set_xlim(x0 - 0.6 * w, x1 + 0.6 * w)
+    ax.set_ylim(y0 - 2 * depth, y1 + 2 * depth)
+    ax.set_xlabel("x [mm]")
+    ax.set_title(f"(b) plate\n{plate.nelements} Q8 elements\n{plate.ndof} DOFs", fontsize=9)
+
+
+def _panel_layer(ax, sc, system, plate, name, panel, letter):
+    """Fig. 2(c)/(d): the elements around a contact's rigid layer, its nodes, its length, and
+    the granule touching it."""
+    layer = rigid_layer(plate, name)
+    contact = _contact(plate, name)
+    g = system.index(name)
+    R = system.radius[g]
+    L = layer.length if layer.length > 0 else sc.solid.mesh.layer_fraction * R
+    side = -np.sign(contact.normal[0])  # granule side: -1 left of the edge, +1 right
+    xlo, xhi = (layer.x - 2.6 * L, layer.x + 2.4 * L) if side < 0 else (layer.x - 2.4 * L, layer.x + 2.6 * L)
+    ylo, yhi = layer.centre - 2.0 * L, layer.centre + 2.0 * L
+    near = _elements_in_window(plate, (xlo, ylo, xhi, yhi))
+    ax.add_collection(_tag(PolyCollection(_element_polygons(plate, near), facecolors=SOLID_COLOUR,
+                                          edgecolors="k", linewidths=0.6), panel, "elements", name))
+    on_layer = np.array([np.isin(e, layer.nodes).sum() >= 2 for e in plate.elements])
+    ax.add_collection(_tag(PolyCollection(_element_polygons(plate, np.flatnonzero(on_layer)), facecolors="#F6D7B0",
+                                          edgecolors="k", linewidths=0.9), panel, "layer-elements", name))
+    used = np.unique(plate.elements[near])
+    ax.plot(*(plate.nodes[used] * MM).T, "o", ms=2.5, color="0.3", zorder=4)
+    ax.add_patch(_tag(Circle(system.pos0[g] * MM, R * MM, fc=MEDIUM_COLOURS[system.medium_index[g] % 4], ec="k",
+                             lw=1.0, alpha=0.8), panel, "granule", name))
+    ax.plot([layer.x * MM] * 2, [layer.y_lo * MM, layer.y_hi * MM], color=LAYER_COLOUR, lw=4,
+            solid_capstyle="butt", zorder=5)
+    (ln,) = ax.plot(*(plate.nodes[layer.nodes] * MM).T, "o", ms=6, mfc=LAYER_COLOUR, mec="k", mew=0.8, zorder=6)
+    _tag(ln, panel, "layer-nodes", name)
+    xd = (layer.x + side * 0.45 * L) * MM
+    draw_dimension(ax, (xd, layer.y_lo * MM), (xd, layer.y_hi * MM), panel, name)
+    Lmm = layer.length * MM
+    _tag(ax.text(xd + side * 0.08 * L * MM, layer.centre * MM, f"rigid layer\n{Lmm:.2f} mm = R/{R / layer.length:.3g}"
+                 if layer.length > 0 else "no rigid layer", fontsize=8, va="center",
+                 ha="right" if side < 0 else "left", bbox=dict(fc="w", ec="none", alpha=0.75, pad=1.0)),
+         panel, "layer-label", name)
+    ax.text((layer.x + side * 0.9 * L) * MM, (layer.centre + 1.6 * L) * MM, name, fontsize=9, fontweight="bold",
+            ha="center", va="center")
+    _clean(ax)
+    ax.set_xlim(xlo * MM, xhi * MM)
+    ax.set_ylim(ylo * MM, yhi * MM)
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    medium = name.split(":")[0]
+    detail = f"{len(layer.nodes)} nodes, {int(on_layer.sum())} elements" if layer.length > 0 else "no rigid layer"
+    ax.set_title(f"({letter}) rigid layer at {medium} contact {name.split(':', 1)[1]}: {detail}", fontsize=9)
+
+
+def _elements_in_window(model, box) -> np.ndarray:
+    """Indices of the elements with a node inside box = (x0, y0, x1, y1) [m]."""
+    x0, y0, x1, y1 = box
+    xy = model.nodes[model.elements]  # (ne, 8, 2)
+    inside = (xy[..., 0] >= x0) & (xy[..., 0] <= x1) & (xy[..., 1] >= y0) & (xy[..., 1] <= y1)
+    return np.flatnonzero(inside.any(axis=1))
+
+
+def figure2(sc):
+    """The paper's Fig. 2 as a matplotlib Figure: (a) beam mesh, (b) plate mesh, (c)/(d) the
+    rigid layers at the central LSGM and SSGM contacts. Both solid models are built from the
+    scenario, whatever its solid kind."""
+    _require_solid(sc)
+    system = _system(sc)
+    beam = _solid_model(sc, system, "beam")
+    plate = _solid_model(sc, system, "plate")
+    fig = plt.figure(figsize=(12.0, 8.0))
+    gs = fig.add_gridspec(2, 3, width_ratios=[0.8, 0.55, 1.25], wspace=0.22, hspace=0.32)
+    _panel_beam(fig.add_subplot(gs[:, 0]), sc, system, beam)
+    _panel_plate(fig.add_subplot(gs[:, 1]), sc, system, plate)
+    sides = [m for m in system.media if central_contact(plate, system, m) is not None][:2]
+    for row, (medium, letter) in enumerate(zip(sides, "cd")):
+        _panel_layer(fig.add_subplot(gs[row, 2]), sc, system, plate, central_contact(plate, system, medium),
+                     letter, letter)
+    return fig
+
+
+def fig2_meshes(sc, out) -> list[Path]:
+    """Write the paper's Fig. 2 (beam and plate meshes, rigid layers) to `out` as PNG and PDF."""
+    from .figures import save_both
+
+    return save_both(figure2(sc), out)
