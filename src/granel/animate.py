@@ -21,7 +21,7 @@ import time
 import tomllib
 import traceback
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dc_field
 from pathlib import Path
 
 import matplotlib
@@ -151,6 +151,7 @@ class FramePlan:
     beam_edges: tuple | None = None  # (x edges (nx+1,), y edges (ne+1,)) of the energy grid
     beam_w: np.ndarray | None = None  # (F, ne, nx) w / w0 across the width, clipped
     model: object = None  # the SolidModel (draws the plate's initial outline)
+    walls: list = dc_field(default_factory=list)  # ((x0, x1), (y0, y1)) of each rigid wall, static
 
     @property
     def frames(self) -> int:
@@ -190,7 +191,8 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
     modes = _modes_of(ds, model) if has_solid and "solid_x" not in ds else None
     X, Yp = ds["x"].values[idx], ds["y"].values[idx]
     plan = FramePlan(field, times, np.asarray(system.radius, float), np.stack([X, Yp], axis=-1), tuple(xlim), tuple(ylim),
-                     solid_kind=model.kind if has_solid else "rigid", model=model)
+                     solid_kind=model.kind if has_solid else "rigid", model=model,
+                     walls=[((w.p0[0], w.p1[0]), (w.p0[1], w.p1[1])) for w in system.walls])
     if field == "deformation":
         mag = magnification or default_magnification(ds)
         plan.magnification = mag
@@ -276,6 +278,8 @@ class MovieFigure:
         if energy:
             ax.set_xticks([])
             ax.set_yticks([])
+        # the rigid walls never move, but granules touch them: they are redrawn over the granules
+        self.walls = [ax.plot(xs, ys, color="k", lw=2.0, solid_capstyle="butt")[0] for xs, ys in plan.walls]
         self.title = ax.set_title(plan.title(0), fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlim(*plan.xlim)
@@ -305,7 +309,7 @@ class MovieFigure:
         moving artists, the grid lines over them (zorder 1.5), the beam line (2), the spines (2.5)
         and the title (3). Tick marks and labels lie outside the axes box, where nothing moves."""
         ax, canvas = self.ax, self.fig.canvas
-        moving = [a for a in (self.granules, self.solid) if a is not None]
+        moving = [a for a in (self.granules, self.solid) if a is not None] + self.walls
         spines = list(ax.spines.values()) if ax.axison and ax.get_frame_on() else []
         over = sorted(moving + spines + [self.title], key=lambda a: a.zorder)  # stable: insertion order
         canvas.draw()  # creates and places the ticks
