@@ -27,7 +27,7 @@ from granel.analysis import (
 )
 from granel.cli import app
 from granel.solid.beam import build_beam
-from granel.solid.build import build_solid
+from granel.scenario import build_solid
 from granel.solid.modal import modal_analysis
 
 

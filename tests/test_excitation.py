@@ -4,47 +4,92 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import quad
 
-from granel.excitation import half_sine, harmonic_burst, read_force_csv, tabulated, SHOCK_LEVELS
+from granel.excitation import PAPER_TAU, SHOCK_LEVELS, half_sine, harmonic_burst, read_force_csv, tabulated
 from granel.granular.system import Excitation, Stepper, initial_state
 
 from conftest import make_system
 
 
 def test_shock_levels_are_the_papers():
+    """Transcribed from the paper (Sec. III and Fig. 9): Fmax = 63.67, 318.3, 1591.6 N, half-sine
+    pulses of 0.01 ms; the levels step by five (to the paper's rounding)."""
     assert SHOCK_LEVELS == {"weak": 63.67, "moderate": 318.3, "strong": 1591.6}
+    assert PAPER_TAU == 0.01e-3
+    assert SHOCK_LEVELS["moderate"] / SHOCK_LEVELS["weak"] == pytest.approx(5, rel=2e-4)
+    assert SHOCK_LEVELS["strong"] / SHOCK_LEVELS["moderate"] == pytest.approx(5, rel=2e-4)
 
 
 def test_half_sine_shape_and_impulse():
     h = half_sine(1591.6, 1e-5)
     assert h(0.5e-5) == pytest.approx(1591.6)
     assert h(-1e-9) == 0 and h(1.01e-5) == 0
-    t = np.linspace(0, 1e-5, 20001)
-    assert np.trapezoid([h(x) for x in t], t) == pytest.approx(h.impulse(), rel=1e-7)
-    assert h.impulse() == pytest.approx(2 * 1591.6 * 1e-5 / math.pi)
+    assert h(0.25e-5) == pytest.approx(1591.6 * math.sqrt(0.5), rel=1e-14)
+    J, _ = quad(h, 0, 1e-5, epsabs=0, epsrel=1e-13)
+    assert J == pytest.approx(2 * 1591.6 * 1e-5 / math.pi, rel=1e-12)  # int_0^tau Fmax sin(pi t / tau) dt
+    assert h.impulse() == pytest.approx(J, rel=1e-12)
+    assert half_sine(100.0, 2e-5, t0=3e-5)(4e-5) == pytest.approx(100.0)  # the delay shifts the pulse
 
 
 def test_burst_and_table(tmp_path):
     b = harmonic_burst(10.0, 1e4, 3, t0=1e-5)
     assert b(1e-5 + 0.25e-4) == pytest.approx(10.0)
-    assert b(1e-5 + 3.01e-4) == 0.0
+    assert b(1e-5 + 0.75e-4) == pytest.approx(-10.0)
+    assert b(1e-5 + 3.01e-4) == 0.0 and b(0.99e-5) == 0.0
+    assert b.end_time == pytest.approx(1e-5 + 3e-4)
+    assert b.impulse() == 0.0  # whole cycles
+    # 1.5 cycles: int_0^(1.5/f) A sin(2 pi f t) dt = A (1 - cos 3 pi) / (2 pi f) = A / (pi f)
+    b = harmonic_burst(10.0, 1e4, 1.5)
+    assert quad(b, 0, 1.5e-4, epsabs=0, epsrel=1e-12)[0] == pytest.approx(10.0 / (math.pi * 1e4), rel=1e-10)
+    assert b.impulse() == pytest.approx(10.0 / (math.pi * 1e4), rel=1e-12)
     (tmp_path / "f.csv").write_text("time,force\n0,0\n1e-5,100\n2e-5,0\n")
     tab = read_force_csv(tmp_path / "f.csv")
     assert tab(0.5e-5) == pytest.approx(50.0)
-    assert tab.impulse() == pytest.approx(1e-3)
+    assert tab(1.5e-5) == pytest.approx(50.0) and tab(2.5e-5) == 0.0
+    assert tab.impulse() == pytest.approx(0.5 * 2e-5 * 100.0, rel=1e-12)  # the triangle's area
     (tmp_path / "bad.csv").write_text("time,force\n0,0\n0,1\n")
     with pytest.raises(ValueError, match="increase"):
         read_force_csv(tmp_path / "bad.csv")
 
 
-@pytest.mark.parametrize("hist", [half_sine(1591.6, 1e-5), harmonic_burst(50.0, 2e5, 1.5), tabulated([0, 1e-5, 3e-5], [0, 80.0, 0])])
-def test_free_granule_gains_impulse_over_mass(hist):
-    """F(t) on a lone granule: v = J/m and the input work equals J^2 / (2 m)."""
-    system = make_system([("a", 0.0, 0.0, 0.005)], excitations=[Excitation(0, (0.6, 0.8), hist)])
+# (history, impulse J = int F dt, first moment int t F dt), both by hand
+FREE_GRANULE_CASES = [
+    # half-sine: J = 2 Fmax tau / pi, int_0^tau t sin(pi t / tau) dt = tau^2 / pi
+    (half_sine(1591.6, 1e-5), 2 * 1591.6 * 1e-5 / math.pi, 1591.6 * 1e-10 / math.pi),
+    # 1.5 cycles: J = A / (pi f); int_0^(3 pi) u sin u du = 3 pi, so the moment is 3 A / (4 pi f^2)
+    (harmonic_burst(50.0, 2e5, 1.5), 50.0 / (math.pi * 2e5), 3 * 50.0 / (4 * math.pi * 4e10)),
+    # triangle (0, 0), (1e-5, 80), (3e-5, 0): area 1.2e-3 N s, centroid at t = 4e-5 / 3
+    (tabulated([0, 1e-5, 3e-5], [0, 80.0, 0]), 1.2e-3, 1.2e-3 * 4e-5 / 3),
+]
+
+
+@pytest.mark.parametrize("hist, J, moment", FREE_GRANULE_CASES)
+def test_free_granule_gains_impulse_over_mass(hist, J, moment):
+    """F(t) along (0.6, 0.8) on a lone granule (m = 4/3 pi R^3 rho): after the load, v = J/m, the
+    input work is J^2 / (2 m) and the displacement at T is (J T - int t F dt) / m."""
+    R = 0.005
+    system = make_system([("a", 0.0, 0.0, R)], excitations=[Excitation(0, (0.6, 0.8), hist)])
     state = initial_state(system)
     Stepper(system).advance(state, 1e-8, 5000)
-    m = system.mass[0]
-    J = hist.impulse()
-    assert np.hypot(*state.vel[0]) == pytest.approx(J / m, rel=1e-9)
-    assert state.vel[0, 1] / state.vel[0, 0] == pytest.approx(0.8 / 0.6)
+    m = 4 / 3 * math.pi * R**3 * 7850.0
+    T = 5000 * 1e-8
+    assert state.t == pytest.approx(T, rel=1e-12)
+    assert hist.impulse() == pytest.approx(J, rel=1e-12)
+    np.testing.assert_allclose(state.vel[0], J / m * np.array([0.6, 0.8]), rtol=1e-9)
     assert state.input_work == pytest.approx(J**2 / (2 * m), rel=1e-9)
+    np.testing.assert_allclose(state.pos[0], (J * T - moment) / m * np.array([0.6, 0.8]), rtol=1e-9)
+    assert state.omega[0] == 0.0 and state.dissipated_friction == 0.0 and state.dissipated_viscous == 0.0
+
+
+@pytest.mark.parametrize("amplitude, cycles", [(10.0, 1.25), (-10.0, 1.5), (10.0, 2.0), (3.0, 0.25)])
+def test_burst_impulse_for_any_cycle_count(amplitude, cycles):
+    """int_0^(c/f) A sin(2 pi f t) dt = A (1 - cos(2 pi c)) / (2 pi f); the largest momentum it
+    gives on the way, |A| / (pi f) after half a period (less for a shorter burst), checked by
+    quadrature of the running integral."""
+    f = 1e4
+    b = harmonic_burst(amplitude, f, cycles)
+    assert b.impulse() == pytest.approx(amplitude * (1 - math.cos(2 * math.pi * cycles)) / (2 * math.pi * f), rel=1e-12, abs=1e-18)
+    s = np.append(np.linspace(0, cycles / f, 41), min(cycles, 0.5) / f)
+    running = np.array([quad(b, 0, x, limit=200)[0] for x in s])
+    assert b.peak_impulse() == pytest.approx(np.abs(running).max(), rel=1e-9)

@@ -12,7 +12,7 @@ import pytest
 
 from granel import scenario as S
 from granel import schematics as X
-from granel.solid.build import build_solid
+from granel.scenario import build_solid
 
 R_L, R_S = 10.0, 5.0  # granule radii [mm]
 SQ3 = math.sqrt(3.0)

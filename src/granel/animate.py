@@ -70,7 +70,7 @@ _MODES_CACHE: dict = {}
 def _modes_of(ds, model):
     """All modes of the solid (cached per process for the last scenario seen: the deformation and
     energy-density movies of one run share them)."""
-    from .coupling.fast import all_modes
+    from .solid.modal import all_modes
 
     key = ds.attrs["scenario"]
     if key not in _MODES_CACHE:

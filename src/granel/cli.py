@@ -23,34 +23,46 @@ def _fail(msg: str, code: int = 2):
     raise typer.Exit(code)
 
 
-def _overrides(solid, excite, shock, fmax, duration, dt, output_every, solver, sets) -> list[str]:
+def _overrides(solid=None, excite=None, duration=None, dt=None, solver=None, sets=None) -> list[str]:
     """The CLI shortcuts as `key=value` scenario overrides (string values quoted for TOML)."""
-    quoted = {"solid.kind": solid, "excitations.0.granule": excite, "excitations.0.shock": shock,
-              "simulation.duration": duration, "simulation.dt": dt, "simulation.output_every": output_every,
+    quoted = {"solid.kind": solid, "excitations.0.granule": excite, "simulation.duration": duration, "simulation.dt": dt,
               "simulation.solver": solver}
-    ov = [f'{key}="{val}"' for key, val in quoted.items() if val]
-    if shock:
-        ov.append("excitations.0.fmax=nan")  # a named shock replaces an explicit fmax (see load_scenario)
-    if fmax is not None:
-        ov.append(f"excitations.0.fmax={fmax}")
-    return ov + list(sets or [])
+    return [f'{key}="{val}"' for key, val in quoted.items() if val] + list(sets or [])
 
 
-def _load_or_fail(name: str, overrides: list[str]) -> S.Scenario:
+def _shock_level(shock: str | None):
+    """`--shock`: a level name (weak, moderate, strong) or a peak force in newtons."""
+    if shock is None or shock in S.SHOCK_LEVELS:
+        return shock
     try:
-        return load_scenario(name, overrides)
+        value = float(shock.removesuffix("N"))
+    except ValueError:
+        _fail(f"--shock {shock!r}: give weak, moderate, strong or a peak force in N, e.g. 500")
+    if not np.isfinite(value):
+        _fail(f"--shock {shock!r}: the peak force must be finite")
+    return value
+
+
+def _load_or_fail(name: str, overrides: list[str], shock=None) -> S.Scenario:
+    try:
+        return load_scenario(name, overrides, shock)
     except S.ScenarioError as e:
         _fail(str(e))
 
 
-def load_scenario(name: str, overrides: list[str]) -> S.Scenario:
+def load_scenario(name: str, overrides: list[str], shock: str | float | None = None) -> S.Scenario:
+    """A scenario with overrides; `shock` (a level name or a peak force [N]) replaces the first
+    excitation's `shock` and `fmax`."""
     raw, base = S.load_raw(name)
-    raw = S.apply_overrides(raw, [o for o in overrides if o != "excitations.0.fmax=nan"])
-    if "excitations.0.fmax=nan" in overrides and raw.get("excitations"):
-        raw["excitations"][0].pop("fmax", None)  # a named shock replaces an explicit fmax
-    sc = S.validate(raw, base)
-    sc._base = base
-    return sc
+    raw = S.apply_overrides(raw, overrides)
+    if shock is not None:
+        if not raw.get("excitations"):
+            raise S.ScenarioError("--shock: the scenario has no excitation to set")
+        exc = raw["excitations"][0]
+        exc.pop("fmax", None)
+        exc.pop("shock", None)
+        exc["shock" if isinstance(shock, str) else "fmax"] = shock
+    return S.validate(raw, base)
 
 
 @app.command()
@@ -58,11 +70,9 @@ def run(
     scenario: str = typer.Argument(..., help="built-in name (see `granel scenarios`) or a TOML file"),
     solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
     excite: Optional[str] = typer.Option(None, help="granule label of the first excitation, e.g. LSGM:3 or SSGM:C"),
-    shock: Optional[str] = typer.Option(None, help="weak | moderate | strong (the paper's half-sine levels)"),
-    fmax: Optional[float] = typer.Option(None, help="peak force of the first excitation [N]"),
+    shock: Optional[str] = typer.Option(None, help="weak | moderate | strong (the paper's half-sine levels) or a peak force in N"),
     duration: Optional[str] = typer.Option(None, help="simulated time, e.g. 0.8ms"),
     dt: Optional[str] = typer.Option(None, help="time step, e.g. 4e-8 or 40ns"),
-    output_every: Optional[str] = typer.Option(None, help="output interval, e.g. 1us"),
     solver: Optional[str] = typer.Option(None, help="coupled solver: paper | fast"),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value (repeatable)"),
     output: Path = typer.Option(Path("granel-out.nc"), "-o", "--output", help="result NetCDF file"),
@@ -74,21 +84,17 @@ def run(
     from .results import write_netcdf
     from .run import run_scenario, summarize
 
-    if shock is not None and shock not in S.SHOCK_LEVELS:
-        _fail(f"--shock {shock!r}: choose weak, moderate or strong")
-    if shock is not None and fmax is not None:
-        _fail("--shock and --fmax are exclusive")
-    ov = _overrides(solid, excite, shock, fmax, duration, dt, output_every, solver, set_)
+    ov = _overrides(solid, excite, duration, dt, solver, set_)
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
-    sc = _load_or_fail(scenario, ov)
+    sc = _load_or_fail(scenario, ov, _shock_level(shock))
     total = sc.simulation.duration
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
                   TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
                   console=console) as bar:
         task = bar.add_task(f"{sc.name} ({sc.solid.kind if sc.solid else 'rigid'})", total=total, t="0")
 
-        def progress(t, steps=0):
+        def progress(t):
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
         try:
@@ -143,17 +149,9 @@ def show(
     """Draw the packing with labels, walls, the solid and the excitations."""
     from .plots import plot_geometry
 
-    sc = _load_or_fail(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
+    sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
     plot_geometry(sc, output)
     console.print(f"wrote {output}")
-
-
-def main():  # pragma: no cover
-    app()
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
 
 
 @app.command()
@@ -166,14 +164,12 @@ def modes(
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
 ):
     """Natural periods and kinds (bending / axial / bulk) of the solid's modes."""
-    from .solid.build import build_solid
     from .solid.modal import classify_modes, modal_analysis
 
-    sc = _load_or_fail(scenario, _overrides(solid, None, None, None, None, None, None, None, set_))
+    sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
     if sc.solid is None or sc.solid.kind == "rigid":
         _fail("modes: the solid is rigid; choose --solid plate or --solid beam")
-    system, _, _ = S.build_granular(sc, sc.base)
-    model = build_solid(sc, system)
+    model = S.build_problem(sc).solid
     want = max(count, 7 if plot else 0)
     md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)
     n = min(count, md.count)
@@ -241,8 +237,7 @@ def paper(
 @app.command()
 def reciprocity(
     scenario: str = typer.Argument("paper", help="built-in name or TOML file"),
-    shock: Optional[str] = typer.Option("strong", help="weak | moderate | strong"),
-    fmax: Optional[float] = typer.Option(None, help="peak force instead of a named shock [N]"),
+    shock: str = typer.Option("strong", help="weak | moderate | strong, or a peak force in N"),
     solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
     a: str = typer.Option("LSGM:3", "--a", help="first excitation/measurement granule"),
     b: str = typer.Option("SSGM:C", "--b", help="second excitation/measurement granule"),
@@ -257,12 +252,10 @@ def reciprocity(
     from .results import write_netcdf
     from .run import run_scenario
 
-    if shock and fmax is not None:
-        shock = None
+    level = _shock_level(shock)
     runs = {}
     for exc in (b, a):
-        ov = _overrides(solid, exc, shock, fmax, duration, None, None, None, set_)
-        sc = _load_or_fail(scenario, ov)
+        sc = _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level)
         with console.status(f"running with the shock on {exc}"):
             ds = run_scenario(sc)
         write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
@@ -388,3 +381,11 @@ def map_(
     except ValueError as e:
         _fail(str(e))
     console.print(f"wrote {output}")
+
+
+def main():  # pragma: no cover
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover - every command above is registered by now
+    main()

@@ -51,10 +51,26 @@ class LoadHistory:
         p = self.params
         if self.kind == "half_sine":
             return 2.0 * p[0] * p[1] / math.pi
-        if self.kind == "burst":
-            return 0.0 if float(p[3]).is_integer() else abs(p[0]) / (math.pi * p[1])
+        if self.kind == "burst":  # int_0^(c/f) A sin(2 pi f s) ds
+            return p[0] * (1.0 - math.cos(2.0 * math.pi * p[3])) / (2.0 * math.pi * p[1])
         if self.kind == "table":
             return float(np.trapezoid(self.values, self.times))
+        return math.inf
+
+    def peak_impulse(self) -> float:
+        """The largest |int_0^t F| over t: the most momentum the load can give a free body at any
+        instant (inf for a constant force). Bounds the speed it imparts, for the safe step."""
+        p = self.params
+        if self.kind == "half_sine":
+            return abs(2.0 * p[0] * p[1] / math.pi)
+        if self.kind == "burst":  # half a period of push, or less for a shorter burst
+            c = min(p[3], 0.5)
+            return abs(p[0]) * (1.0 - math.cos(2.0 * math.pi * c)) / (2.0 * math.pi * p[1])
+        if self.kind == "table":
+            if len(self.times) < 2:
+                return 0.0
+            steps = 0.5 * (self.values[1:] + self.values[:-1]) * np.diff(self.times)
+            return float(np.max(np.abs(np.concatenate([[0.0], np.cumsum(steps)]))))
         return math.inf
 
     def peak(self) -> float:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import tomllib
 from pathlib import Path
 
@@ -40,19 +39,11 @@ def scenario_of(ds) -> dict:
     return tomllib.loads(ds.attrs["scenario"])
 
 
-@functools.lru_cache(maxsize=8)
-def _model_cached(scenario_toml: str):
-    from . import scenario as S
-    from .solid.build import build_solid
-
-    sc = S.validate(tomllib.loads(scenario_toml))
-    system, _, _ = S.build_granular(sc)
-    return sc, system, build_solid(sc, system)
-
-
 def model_of(ds):
     """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
-    return _model_cached(ds.attrs["scenario"])
+    from .run import built_from_result
+
+    return built_from_result(ds)
 
 
 def solid_state_at(ds, time: float, modes=None):
@@ -61,7 +52,7 @@ def solid_state_at(ds, time: float, modes=None):
     if "solid_x" in ds:
         return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float), k
     if modes is None:
-        from .coupling.fast import all_modes
+        from .solid.modal import all_modes
 
         modes = all_modes(model_of(ds)[2])
     return modes.shapes @ ds["solid_eta"].values[k].astype(float), modes.shapes @ ds["solid_eta_dot"].values[k].astype(float), k

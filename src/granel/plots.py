@@ -22,9 +22,9 @@ def save(fig, path: str | Path, dpi: int = 200) -> Path:
 
 def plot_geometry(sc, output: str | Path, ax=None):
     """The packing with labels, walls, the solid, the solid contact points and excitations."""
-    from .scenario import build_granular
+    from .run import built_models
 
-    system, state, media = build_granular(sc, sc.base)
+    system = built_models(sc)[0]
     own = ax is None
     if own:
         fig, ax = plt.subplots(figsize=(7, 7))

@@ -179,7 +179,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's
     scenario (e.g. a shorter duration for a smoke test)."""
     from . import figures as F
-    from .coupling.fast import all_modes
+    from .solid.modal import all_modes
     from .solid.modal import classify_modes
 
     t0 = time.perf_counter()

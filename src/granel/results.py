@@ -49,38 +49,92 @@ def base_attrs(scenario_toml: str, solver: dict) -> dict:
     return attrs
 
 
-def granular_dataset(times, labels, media_names, medium_index, rec: dict, attrs: dict) -> xr.Dataset:
-    """Assemble the standard result Dataset from recorded arrays (see the README for names)."""
-    t = np.asarray(times)
+def trajectory_dataset(traj, system, model, attrs: dict, omega=None) -> xr.Dataset:
+    """The standard result Dataset of a run (see the README for the names), from a solver-neutral
+    `Trajectory`, the granular system and the solid model (`omega`: the natural frequencies of
+    the modal coordinates, if the solid state is modal)."""
+    t = np.asarray(traj.times, float)
+    r = traj.rec
+    nt = len(t)
+    names = [c.name for c in model.contacts]
     coords = {
         "time": ("time", t, {"units": "s"}),
-        "granule": ("granule", np.array(labels, dtype=object)),
-        "medium": ("granule", np.array([media_names[k] for k in medium_index], dtype=object)),
+        "granule": ("granule", np.array(system.labels, dtype=object)),
+        "medium": ("granule", np.array([system.media[k] for k in system.medium_index], dtype=object)),
+        "contact": ("contact", np.array(names, dtype=object)),
     }
-    pos = np.asarray(rec["pos"])
-    vel = np.asarray(rec["vel"])
+    pos, vel = np.asarray(r["pos"]), np.asarray(r["vel"])
     data = {
         "x": (("time", "granule"), pos[:, :, 0], {"units": "m", "long_name": "centre x"}),
         "y": (("time", "granule"), pos[:, :, 1], {"units": "m", "long_name": "centre y"}),
-        "theta": (("time", "granule"), np.asarray(rec["theta"]), {"units": "rad"}),
+        "theta": (("time", "granule"), np.asarray(r["theta"]), {"units": "rad"}),
         "v_x": (("time", "granule"), vel[:, :, 0], {"units": "m/s"}),
         "v_y": (("time", "granule"), vel[:, :, 1], {"units": "m/s"}),
-        "omega": (("time", "granule"), np.asarray(rec["omega"]), {"units": "rad/s"}),
+        "omega": (("time", "granule"), np.asarray(r["omega"]), {"units": "rad/s"}),
     }
-    em = np.asarray(rec["energy_media"])
-    for k, name in enumerate(media_names):
+    em = np.asarray(r["energy_media"]).reshape(nt, -1)
+    for k, name in enumerate(system.media):
         data[f"energy_{name.lower()}"] = ("time", em[:, k], {"units": "J", "long_name": f"energy of {name}, eq. (11)"})
     for key, long in (
         ("energy_solid", "solid energy 1/2 v'Mv + 1/2 x'Kx, eq. (11)"),
+        ("energy_solid_kinetic", "solid kinetic energy 1/2 v'Mv"),
+        ("energy_solid_potential", "solid strain energy 1/2 x'Kx"),
         ("dissipated_viscous", "work of viscous contact forces, eq. (12)"),
         ("dissipated_friction", "work of friction forces, eq. (12)"),
         ("input_work", "work of the applied forces"),
         ("balance_error", "E_solid + E_granular + D - input work, eq. (13)"),
     ):
-        data[key] = ("time", np.asarray(rec[key]), {"units": "J", "long_name": long})
-    for key, val in rec.items():
-        if key.startswith("extra:"):
-            name = key[6:]
-            dims, arr, a = val
-            data[name] = (dims, np.asarray(arr), a)
+        data[key] = ("time", np.asarray(r[key], float), {"units": "J", "long_name": long})
+    for key, long in (("normal", "normal force on the solid (along n_ik)"), ("tangential", "tangential force on the solid (along t_ik = k x n_ik)")):
+        data[f"contact_force_{key}"] = (("time", "contact"), np.asarray(r[f"force_{key}"], float).reshape(nt, -1), {"units": "N", "long_name": long})
+    data.update(_step_variables(traj.steps, t, len(names)))
+    if model.ndof:
+        data.update(_solid_variables(traj, omega))
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _step_variables(steps: dict, times: np.ndarray, nc: int) -> dict:
+    """Per accepted step (Fig. 11), and per output interval: the smallest step, the mean
+    iterations and the largest |lambda| (A9) since the previous output."""
+    st_t = np.asarray(steps["t"], float)
+    dts = np.asarray(steps["h"], float)
+    it = np.asarray(steps["iterations"], np.int64)
+    lam = np.asarray(steps["lam"], np.float32).reshape(len(st_t), nc)
+    # the steps that end in (t_{j-1}, t_j]
+    idx = np.searchsorted(st_t, times + 1e-15 * np.maximum(times, 1e-12), side="right")
+    step_size = np.full(len(times), np.nan)
+    iters = np.full(len(times), np.nan)
+    lmax = np.zeros((len(times), nc), np.float32)
+    for j in range(1, len(times)):
+        seg = slice(idx[j - 1], idx[j])
+        if idx[j] > idx[j - 1]:
+            step_size[j] = dts[seg].min()
+            iters[j] = it[seg].mean()
+            lmax[j] = lam[seg].max(axis=0)
+    return {
+        "step_size": (("time",), step_size, {"units": "s", "long_name": "smallest step since the previous output"}),
+        "iterations": (("time",), iters, {"long_name": "mean interface iterations since the previous output"}),
+        "lambda_max": (("time", "contact"), lmax, {"long_name": "max |lambda| (A9) since the previous output"}),
+        "step_time": (("step",), st_t, {"units": "s", "long_name": "time at the end of each accepted step"}),
+        "step_dt": (("step",), dts, {"units": "s"}),
+        "step_iterations": (("step",), it, {}),
+        "step_lambda": (("step", "contact"), lam, {"long_name": "|lambda| (A9) of each step at each contact"}),
+    }
+
+
+def _solid_variables(traj, omega) -> dict:
+    ts = np.asarray(traj.solid_times, float)
+    nst = len(ts)
+    out = {"solid_time": (("solid_time",), ts, {"units": "s"})}
+    if "eta" in traj.solid:  # mass-normalised modal coordinates: q = Phi eta
+        out["solid_eta"] = (("solid_time", "mode"), np.asarray(traj.solid["eta"], np.float32).reshape(nst, -1),
+                            {"long_name": "modal displacements (mass-normalised modes)"})
+        out["solid_eta_dot"] = (("solid_time", "mode"), np.asarray(traj.solid["eta_dot"], np.float32).reshape(nst, -1),
+                                {"long_name": "modal velocities"})
+        out["mode_omega"] = (("mode",), np.asarray(omega, float), {"units": "rad/s"})
+    else:  # reduced nodal coordinates (solids too large for all modes)
+        out["solid_x"] = (("solid_time", "dof"), np.asarray(traj.solid["q"], np.float32).reshape(nst, -1),
+                          {"long_name": "reduced solid displacements q"})
+        out["solid_v"] = (("solid_time", "dof"), np.asarray(traj.solid["v"], np.float32).reshape(nst, -1),
+                          {"long_name": "reduced solid velocities"})
+    return out

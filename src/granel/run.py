@@ -1,43 +1,78 @@
-"""Scenario -> simulation -> result Dataset, and the run summary."""
+"""Scenario -> built problem -> solver -> driver -> trajectory -> result Dataset, and the run summary.
+
+This is the one place that knows both the scenario and the solvers: below it, solvers receive
+built objects (`problem.Problem`); above it, figures and analysis read result Datasets (and
+rebuild the models of a result through `built_from_result`).
+"""
 
 from __future__ import annotations
 
-import time
+import functools
+import tomllib
 
 import numpy as np
 import xarray as xr
 
 from . import scenario as S
 from .checkpoint import fingerprint
-from .coupling.rigid import simulate_rigid
-from .granular.system import Stepper
-from .results import base_attrs, granular_dataset
+from .coupling.driver import drive
+from .problem import Problem
+from .results import base_attrs, trajectory_dataset
+
+
+def make_solver(problem: Problem, sparse: bool | None = None):
+    """The solver for a problem: the compiled modal core (all modes; none for a rigid solid), or
+    sparse Newmark around the same core for solids too large for all modes (`sparse` forces
+    either)."""
+    from .coupling.solver import ModalSolver
+    from .solid.modal import DENSE_LIMIT, all_modes
+
+    solid, per = problem.solid, problem.schedule.per
+    if sparse if sparse is not None else solid.ndof > DENSE_LIMIT:
+        from .coupling.sparse import SparseSolver
+
+        return SparseSolver(problem.system, problem.state, solid, problem.settings, per)
+    modes = all_modes(solid) if solid.ndof else None
+    return ModalSolver(problem.system, problem.state, solid, problem.settings, per, modes)
+
+
+def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None) -> xr.Dataset:
+    """Solve a built problem and return its result Dataset."""
+    solver = make_solver(problem, sparse)
+    fp = fingerprint(problem.source + problem.settings.method)
+    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp)
+    solid = problem.solid
+    steps = np.asarray(traj.steps["h"], float)
+    its = np.asarray(traj.steps["iterations"], float)
+    info = {**traj.solver, "steps": int(len(steps)), "min_step": float(steps.min()) if len(steps) else problem.settings.dt,
+            "mean_iterations": float(its.mean()) if len(its) else 0.0, "max_iterations_used": int(its.max()) if len(its) else 0}
+    attrs = base_attrs(problem.source, info)
+    attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
+    omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
+    return trajectory_dataset(traj, problem.system, solid, attrs, omega)
 
 
 def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None) -> xr.Dataset:
     """Run a validated scenario and return its result Dataset."""
-    system, state, media = S.build_granular(sc, sc.base)
-    sim = sc.simulation
-    kind = sc.solid.kind if sc.solid is not None else "rigid"
-    t0 = time.perf_counter()
-    fp = fingerprint(S.to_toml(sc))
-    if kind == "rigid":
-        stepper = Stepper(system, substep=True)
-        rec = simulate_rigid(stepper, state, sim.duration, sim.dt, sim.output_every, progress,
-                             checkpoint if sim.checkpoint_every > 0 else None, sim.checkpoint_every, resume, fp)
-        steps = int(round(rec.times[-1] / sim.dt))
-        solver = {"name": "rk4-rigid", "dt": sim.dt, "steps": steps}
-    else:
-        from .coupling.coupled import simulate_coupled
+    return run_problem(S.build_problem(sc), progress, checkpoint, resume)
 
-        return simulate_coupled(sc, progress, checkpoint, resume)
-    wall = time.perf_counter() - t0
-    solver["wall_time_s"] = wall
-    solver["neighbour_rebuilds"] = stepper.rebuilds
-    attrs = base_attrs(S.to_toml(sc), solver)
-    attrs["solid_kind"] = kind
-    ds = granular_dataset(rec.times, system.labels, system.media, system.medium_index, rec.rec, attrs)
-    return ds
+
+@functools.lru_cache(maxsize=8)
+def _built_from_text(scenario_toml: str):
+    sc = S.validate(tomllib.loads(scenario_toml))
+    problem = S.build_problem(sc)
+    return sc, problem.system, problem.solid
+
+
+def built_models(sc: S.Scenario):
+    """(GranularSystem, SolidModel) of a scenario, for drawings."""
+    problem = S.build_problem(sc)
+    return problem.system, problem.solid
+
+
+def built_from_result(ds):
+    """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
+    return _built_from_text(ds.attrs["scenario"])
 
 
 def summarize(ds: xr.Dataset) -> dict:
@@ -69,8 +104,6 @@ def summarize(ds: xr.Dataset) -> dict:
 
 
 def _scenario_name(ds) -> str:
-    import tomllib
-
     try:
         return tomllib.loads(ds.attrs["scenario"]).get("name", "")
     except Exception:  # noqa: BLE001 - a summary must not fail on foreign files

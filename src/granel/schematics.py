@@ -82,16 +82,15 @@ def with_solid_kind(sc, kind: str):
 
 
 def _system(sc):
-    from .scenario import build_granular
+    from .run import built_models
 
-    system, _, _ = build_granular(sc, sc.base)
-    return system
+    return built_models(with_solid_kind(sc, "rigid"))[0]
 
 
 def _solid_model(sc, system, kind: str):
-    from .solid.build import build_solid
+    from .run import built_models
 
-    return build_solid(with_solid_kind(sc, kind), system)
+    return built_models(with_solid_kind(sc, kind))[1]
 
 
 def _contact(model, name: str):

@@ -1,9 +1,9 @@
-"""The assembled granular system: arrays for the compiled kernels, neighbour lists, stepping.
+"""The assembled granular system: static data, the evolving state, neighbour lists, stepping.
 
-`GranularSystem` is static data (granules, walls, contact law, solid contact points,
-excitations); `GranularState` is the evolving state. `advance` is a pure-ish function that
-moves a state forward by RK4 steps, rebuilding the neighbour list when granules have moved
-more than half the skin distance.
+`GranularSystem` is static data (granules, walls, contact law, solid contact points, loads) and
+hands the compiled kernels their bundles (`granular.bundles`); `GranularState` is the evolving
+state; `Stepper` moves a state forward by RK4 steps, rebuilding the neighbour list when granules
+have moved more than half the skin distance.
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from ..materials import (
     sphere_mass,
 )
 from . import kernels
+from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
+    interface_buffers, state_size, still
 from .packing import Medium, Wall
 
 
@@ -38,11 +40,9 @@ class ContactLaw:
 
 @dataclass(frozen=True)
 class SolidContact:
-    """A contact point of a granule with a solid's edge (a massless rigid layer, m* = 0).
-
-    `normal` is n_ik: from the granule centre toward the solid. The point moves with the
-    solid; `E_solid`/`nu_solid` give E* (None = rigid layer: E* = E_g / (1 - nu_g^2)).
-    """
+    """A contact point of a granule with a solid's edge (a massless rigid layer, m* = 0:
+    E* = E_g / (1 - nu_g^2), R* = R_g, no damping). `normal` is n_ik: from the granule centre
+    toward the solid. The point moves with the solid."""
 
     granule: int
     point: tuple[float, float]
@@ -73,47 +73,32 @@ class GranularSystem:
     solid_contacts: list[SolidContact]
     excitations: list[Excitation]
     skin: float = 0.0
-    # derived arrays
-    wall_p0: np.ndarray = field(init=False)
-    wall_dir: np.ndarray = field(init=False)
-    wall_len: np.ndarray = field(init=False)
-    wall_n: np.ndarray = field(init=False)
-    wall_medium: np.ndarray = field(init=False)
-    sg: np.ndarray = field(init=False)
-    sp: np.ndarray = field(init=False)
-    sn: np.ndarray = field(init=False)
-    sA: np.ndarray = field(init=False)
-    sG: np.ndarray = field(init=False)
+    # derived: the bundles the kernels read
+    wall_geometry: tuple = field(init=False)  # (p0, tangent, length, normal, medium index) per wall
+    points: Points = field(init=False)
+    loads: Loads = field(init=False)
 
     def __post_init__(self):
         n = len(self.labels)
         if self.skin <= 0.0:
             self.skin = 0.1 * float(self.radius.min()) if n else 1e-3
-        nw = len(self.walls)
-        self.wall_p0 = np.zeros((nw, 2))
-        self.wall_dir = np.zeros((nw, 2))
-        self.wall_len = np.zeros(nw)
-        self.wall_n = np.zeros((nw, 2))
-        self.wall_medium = np.full(nw, -1, dtype=np.int64)
-        for k, w in enumerate(self.walls):
-            p0 = np.asarray(w.p0, float)
-            d = np.asarray(w.p1, float) - p0
-            L = float(np.hypot(*d))
-            self.wall_p0[k] = p0
-            self.wall_dir[k] = d / L
-            self.wall_len[k] = L
-            nn = np.asarray(w.normal, float)
-            self.wall_n[k] = nn / np.hypot(*nn)
-            if w.medium:
-                self.wall_medium[k] = self.media.index(w.medium)
+        self.wall_geometry = wall_geometry(self.walls, self.media)
         nc = len(self.solid_contacts)
-        self.sg = np.array([c.granule for c in self.solid_contacts], dtype=np.int64)
-        self.sp = np.array([c.point for c in self.solid_contacts], float).reshape(nc, 2)
-        self.sn = np.array([c.normal for c in self.solid_contacts], float).reshape(nc, 2)
-        self.sn /= np.maximum(np.hypot(self.sn[:, 0], self.sn[:, 1]), 1e-300)[:, None]
+        g = np.array([c.granule for c in self.solid_contacts], dtype=np.int64)
+        nrm = np.array([c.normal for c in self.solid_contacts], float).reshape(nc, 2)
+        nrm /= np.maximum(np.hypot(nrm[:, 0], nrm[:, 1]), 1e-300)[:, None]
         # granule-solid law: rigid massless layer, E* = E/(1-nu^2), R* = R, m* = 0 (no damping)
-        self.sA = np.array([hertz_coefficient(effective_modulus(self.E[g], self.nu[g]), self.radius[g]) for g in self.sg])
-        self.sG = np.zeros(nc)
+        A = np.array([hertz_coefficient(effective_modulus(self.E[k], self.nu[k]), self.radius[k]) for k in g])
+        self.points = Points(g, np.array([c.point for c in self.solid_contacts], float).reshape(nc, 2), nrm, A, np.zeros(nc))
+        self.loads = load_bundle(self.excitations)
+
+    @property
+    def granules(self) -> Granules:
+        return Granules(self.radius, self.mass, self.inertia)
+
+    @property
+    def contact_law(self) -> Law:
+        return Law(float(self.law.mu), float(self.law.k_s))
 
     @property
     def n(self) -> int:
@@ -170,7 +155,7 @@ def build_system(
 
 @dataclass
 class GranularState:
-    """y: the augmented state vector (see kernels); t: time [s]."""
+    """y: the augmented state vector (layout in `granular.bundles`); t: time [s]."""
 
     y: np.ndarray
     t: float = 0.0
@@ -197,20 +182,20 @@ class GranularState:
 
     @property
     def dissipated_viscous(self) -> float:
-        return float(self.y[6 * self.n + kernels.ACC_VISC])
+        return float(self.y[6 * self.n + ACC_VISC])
 
     @property
     def dissipated_friction(self) -> float:
-        return float(self.y[6 * self.n + kernels.ACC_FRIC])
+        return float(self.y[6 * self.n + ACC_FRIC])
 
     @property
     def input_work(self) -> float:
-        return float(self.y[6 * self.n + kernels.ACC_WORK])
+        return float(self.y[6 * self.n + ACC_WORK])
 
 
 def initial_state(system: GranularSystem, velocities=None, spins=None) -> GranularState:
     n = system.n
-    y = np.zeros(6 * n + 3)
+    y = np.zeros(state_size(n))
     y[: 2 * n] = system.pos0.ravel()
     if velocities is not None:
         y[3 * n : 5 * n] = np.asarray(velocities, float).ravel()
@@ -219,19 +204,30 @@ def initial_state(system: GranularSystem, velocities=None, spins=None) -> Granul
     return GranularState(y, 0.0)
 
 
+def wall_geometry(walls: list[Wall], media: list[str]):
+    """(p0, unit tangent, length, unit normal, medium index or -1) arrays of the walls."""
+    nw = len(walls)
+    p0, tan, length, nrm = np.zeros((nw, 2)), np.zeros((nw, 2)), np.zeros(nw), np.zeros((nw, 2))
+    medium = np.full(nw, -1, dtype=np.int64)
+    for k, w in enumerate(walls):
+        p0[k] = w.p0
+        d = np.asarray(w.p1, float) - p0[k]
+        length[k] = float(np.hypot(*d))
+        tan[k] = d / length[k]
+        nrm[k] = np.asarray(w.normal, float) / np.hypot(*w.normal)
+        if w.medium:
+            medium[k] = media.index(w.medium)
+    return p0, tan, length, nrm, medium
+
+
 @dataclass
 class NeighbourList:
-    """Candidate contacts within `skin` of touching, with their Hertz/damping coefficients."""
+    """Candidate contacts within `skin` of touching (pairs and granule-wall), with their Hertz and
+    damping coefficients, found around the positions `ref_pos`."""
 
     ref_pos: np.ndarray
-    pi: np.ndarray
-    pj: np.ndarray
-    pA: np.ndarray
-    pG: np.ndarray
-    wg: np.ndarray
-    ww: np.ndarray
-    wA: np.ndarray
-    wG: np.ndarray
+    pairs: Pairs
+    walls: Walls
 
 
 def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
@@ -241,8 +237,7 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     skin = system.skin
     law = system.law
     if n > 1:
-        tree = cKDTree(pos)
-        pairs = tree.query_pairs(2.0 * R.max() + skin, output_type="ndarray")
+        pairs = cKDTree(pos).query_pairs(2.0 * R.max() + skin, output_type="ndarray")
     else:
         pairs = np.zeros((0, 2), dtype=np.int64)
     if len(pairs):
@@ -254,137 +249,119 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         i, j = i[order].astype(np.int64), j[order].astype(np.int64)
     else:
         i = j = np.zeros(0, dtype=np.int64)
+    # eq. (4) for both granules' properties, eq. (3)
     inv_E = (1 - system.nu[i] ** 2) / system.E[i] + (1 - system.nu[j] ** 2) / system.E[j]
-    Rs = R[i] * R[j] / (R[i] + R[j])
-    pA = 4.0 / 3.0 / inv_E * np.sqrt(Rs)
+    pA = 4.0 / 3.0 / inv_E * np.sqrt(R[i] * R[j] / (R[i] + R[j]))
     ms = system.mass[i] * system.mass[j] / (system.mass[i] + system.mass[j])
     pG = law.alpha_n * np.sqrt(ms * pA)
-    # walls
+    p0, tan, length, nrm, medium = system.wall_geometry
     wg, ww = [], []
-    for k in range(len(system.walls)):
-        r = pos - system.wall_p0[k]
-        along = r @ system.wall_dir[k]
-        h = r @ system.wall_n[k]
-        ok = (h < R + skin) & (h > -R) & (along > -skin) & (along < system.wall_len[k] + skin)
-        if system.wall_medium[k] >= 0:
-            ok &= system.medium_index == system.wall_medium[k]
+    for k in range(len(length)):
+        r = pos - p0[k]
+        along = r @ tan[k]
+        h = r @ nrm[k]
+        ok = (h < R + skin) & (h > -R) & (along > -skin) & (along < length[k] + skin)
+        if medium[k] >= 0:
+            ok &= system.medium_index == medium[k]
         idx = np.flatnonzero(ok)
         wg += idx.tolist()
         ww += [k] * len(idx)
     wg = np.array(wg, dtype=np.int64)
-    ww = np.array(ww, dtype=np.int64)
-    wA = np.array([hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), effective_radius(R[g])) for g in wg])
-    wG = np.array([damping_coefficient(law.alpha_n, effective_mass(system.mass[g], None), a) for g, a in zip(wg, wA)])
-    return NeighbourList(pos.copy(), i, j, pA, pG, wg, ww, wA.reshape(-1), wG.reshape(-1))
+    # granule-rigid wall: E* = E/(1-nu^2), R* = R, m* = m (eq. 4 with a rigid, immovable partner)
+    wA = np.array([hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), effective_radius(R[g])) for g in wg]).reshape(-1)
+    wG = np.array([damping_coefficient(law.alpha_n, effective_mass(system.mass[g], None), a) for g, a in zip(wg, wA)]).reshape(-1)
+    walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm)
+    return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
-@dataclass
-class ExcitationArrays:
-    eg: np.ndarray
-    edir: np.ndarray
-    ekind: np.ndarray
-    epar: np.ndarray
-    eoff: np.ndarray
-    tab_t: np.ndarray
-    tab_v: np.ndarray
-
-
-def excitation_arrays(excitations: list[Excitation]) -> ExcitationArrays:
+def load_bundle(excitations: list[Excitation]) -> Loads:
+    """The applied loads as compiled-kernel arrays (kinds in excitation.KIND_CODES)."""
     ne = len(excitations)
-    eg = np.array([e.granule for e in excitations], dtype=np.int64)
-    edir = np.zeros((ne, 2))
-    ekind = np.zeros(ne, dtype=np.int64)
-    epar = np.zeros((ne, 4))
-    eoff = np.zeros(ne + 1, dtype=np.int64)
+    direction = np.zeros((ne, 2))
+    kind = np.zeros(ne, dtype=np.int64)
+    params = np.zeros((ne, 4))
+    offset = np.zeros(ne + 1, dtype=np.int64)
     tt, tv = [], []
     for k, e in enumerate(excitations):
         d = np.asarray(e.direction, float)
-        edir[k] = d / np.hypot(*d)
-        ekind[k] = KIND_CODES[e.history.kind]
+        direction[k] = d / np.hypot(*d)
+        kind[k] = KIND_CODES[e.history.kind]
         p = list(e.history.params)[:4]
-        epar[k, : len(p)] = p
+        params[k, : len(p)] = p
         tt.append(np.asarray(e.history.times, float))
         tv.append(np.asarray(e.history.values, float))
-        eoff[k + 1] = eoff[k] + len(e.history.times)
+        offset[k + 1] = offset[k] + len(e.history.times)
     cat = lambda a: np.concatenate(a) if a else np.zeros(0)  # noqa: E731
-    return ExcitationArrays(eg, edir, ekind, epar, eoff, cat(tt), cat(tv))
+    return Loads(np.array([e.granule for e in excitations], dtype=np.int64), direction, kind, params, offset, cat(tt), cat(tv))
 
 
 class NonFiniteStateError(RuntimeError):
     """Raised when the integration produces NaN or inf; carries a diagnosis."""
 
 
-@dataclass
 class Stepper:
-    """Binds a system to its compiled-kernel arrays and advances states by RK4 steps."""
+    """Binds a system to its neighbour list and advances states by RK4 steps; the current
+    `model` bundle is what every compiled kernel reads."""
 
-    system: GranularSystem
-    nl: NeighbourList = None
-    ex: ExcitationArrays = None
-    rebuilds: int = 0
-    substep: bool = False  # split steps into RK4 sub-steps where the friction is stiff (large k_s)
+    def __init__(self, system: GranularSystem, substep: bool = False, pos=None):
+        self.system = system
+        self.substep = substep  # split steps into RK4 sub-steps where the friction is stiff (large k_s)
+        self.rebuilds = 0
+        self.refresh(system.pos0 if pos is None else pos)
+        self._still = still(len(system.solid_contacts))
 
-    def __post_init__(self):
-        self.nl = build_neighbours(self.system, self.system.pos0)
-        self.ex = excitation_arrays(self.system.excitations)
-        nc = len(self.system.solid_contacts)
-        self._zero = np.zeros((nc, 2))
-
-    def advance(self, state: GranularState, dt: float, nsteps: int, su0=None, sv0=None, sa=None) -> GranularState:
-        """Advance `state` in place by nsteps RK4 steps; the solid contact points follow
-        u(tau) = su0 + sv0 tau + sa tau^2 / 2 within each step (zero for a rigid solid)."""
+    def refresh(self, pos) -> None:
+        """New candidate contacts around `pos`."""
         s = self.system
-        z = self._zero
-        su0 = z if su0 is None else su0
-        sv0 = z if sv0 is None else sv0
-        sa = z if sa is None else sa
+        self.nl = build_neighbours(s, np.array(pos, float).reshape(-1, 2))
+        self.model = GranularModel(s.granules, s.contact_law, self.nl.pairs, self.nl.walls, s.points, s.loads)
+
+    def maybe_refresh(self, pos) -> bool:
+        """Rebuild the neighbour list if a granule moved (nearly) half a skin from its reference."""
+        if np.max(np.abs(pos - self.nl.ref_pos), initial=0.0) >= 0.5 * self.system.skin / np.sqrt(2.0):
+            self.refresh(pos)
+            self.rebuilds += 1
+            return True
+        return False
+
+    @property
+    def max_disp(self) -> float:
+        return 0.5 * self.system.skin
+
+    def advance(self, state: GranularState, dt: float, nsteps: int, motion: Motion | None = None) -> GranularState:
+        """Advance `state` in place by nsteps RK4 steps; the solid contact points follow `motion`
+        within each step (still for a rigid solid)."""
+        motion = self._still if motion is None else motion
         done = 0
         while done < nsteps:
-            nl = self.nl
-            ex = self.ex
-            kernel = kernels.rk4_advance_substepped if self.substep else kernels.rk4_advance
-            k = kernel(
-                state.y, state.t, dt, nsteps - done, s.n, nl.ref_pos, 0.5 * s.skin,
-                s.radius, s.mass, s.inertia, s.law.mu, s.law.k_s,
-                nl.pi, nl.pj, nl.pA, nl.pG,
-                nl.wg, nl.ww, nl.wA, nl.wG, s.wall_p0, s.wall_dir, s.wall_len, s.wall_n,
-                s.sg, s.sp, s.sn, s.sA, s.sG, su0, sv0, sa,
-                ex.eg, ex.edir, ex.ekind, ex.epar, ex.eoff, ex.tab_t, ex.tab_v,
-            )
+            k = kernels.rk4_advance(state.y, state.t, dt, nsteps - done, self.model, motion, self.nl.ref_pos,
+                                    self.max_disp, self.substep)
             if k < 0:
-                steps_ok = -k - 2
-                state.t += steps_ok * dt
+                state.t += (-k - 2) * dt
                 raise NonFiniteStateError(
                     f"granular state became non-finite at t = {state.t:.6e} s (step size {dt:.3e} s): "
-                    "the step is too large for the contact stiffness or the friction smoothness k_s; "
-                    "reduce dt"
+                    "the step is too large for the contact stiffness or the friction smoothness k_s; reduce dt"
                 )
             state.t += k * dt
             done += k
-            moved = np.max(np.abs(state.pos - nl.ref_pos), initial=0.0)
-            if moved >= 0.5 * s.skin / np.sqrt(2.0):
-                # a granule moved (nearly) half a skin: refresh the candidate contacts
-                self.nl = build_neighbours(s, state.pos.copy())
-                self.rebuilds += 1
+            self.maybe_refresh(state.pos)
         return state
 
     def energies(self, state: GranularState, su=None):
-        s, nl = self.system, self.nl
-        su = self._zero if su is None else su
-        return kernels.granule_energies(
-            state.y, s.n, s.radius, s.mass, s.inertia,
-            nl.pi, nl.pj, nl.pA, nl.wg, nl.ww, nl.wA, s.wall_p0, s.wall_dir, s.wall_len, s.wall_n,
-            s.sg, s.sp, s.sn, s.sA, su,
-        )
+        """(kinetic, rotational, potential) per granule, eq. (11); solid points displaced by su."""
+        su = self._still.u0 if su is None else su
+        return kernels.granule_energies(state.y, self.model, su)
 
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:
         """Energy of each medium, eq. (11): shape (n_media,)."""
         kin, rot, pot = self.energies(state, su)
-        e = kin + rot + pot
-        return np.bincount(self.system.medium_index, weights=e, minlength=len(self.system.media))
+        return np.bincount(self.system.medium_index, weights=kin + rot + pot, minlength=len(self.system.media))
 
-    def solid_contact_state(self, state: GranularState, su=None, sv=None):
-        s = self.system
-        su = self._zero if su is None else su
-        sv = self._zero if sv is None else sv
-        return kernels.solid_contact_state(state.y, s.n, s.radius, s.law.mu, s.law.k_s, s.sg, s.sp, s.sn, s.sA, s.sG, su, sv)
+    def interface(self, state: GranularState, su=None, sv=None):
+        """The forces on the solid at its contact points (and their derivatives), for the granular
+        state and the points' displacement su and velocity sv (`bundles.InterfaceForces`)."""
+        nc = len(self.system.solid_contacts)
+        out = interface_buffers(nc)
+        kernels.interface_forces(state.y, self.model, self._still.u0 if su is None else su,
+                                 self._still.u0 if sv is None else sv, out)
+        return out

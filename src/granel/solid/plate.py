@@ -153,12 +153,27 @@ def _tr_identity(eps):
     return out
 
 
-def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], nx=8, growth=1.6,
-                max_size=2.5e-3, x_growth=1.5, rigid_layers=True, clamped=(True, True)) -> SolidModel:
-    """Assemble the reduced plate model with its contact points (one per layer)."""
+@dataclass(frozen=True)
+class PlateMesh:
+    """How the plate is meshed: elements across the width, the size growth away from the
+    contacts (capped at max_size along the length), the width grading toward the edges, and
+    whether the rigid layers are kept."""
+
+    nx: int = 8
+    growth: float = 1.6
+    max_size: float = 2.5e-3
+    x_growth: float = 1.5
+    rigid_layers: bool = True
+
+
+def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
+                clamped=(True, True)) -> SolidModel:
+    """Assemble the reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one
+    per layer)."""
+    rigid_layers, nx = mesh.rigid_layers, mesh.nx
     left = [(l.y, l.length / 2) for l in layers if l.edge == "left"]
     right = [(l.y, l.length / 2) for l in layers if l.edge == "right"]
-    mesh = plate_mesh(x0, y0, width, length, left, right, nx, growth, max_size, x_growth)
+    mesh = plate_mesh(x0, y0, width, length, left, right, nx, mesh.growth, mesh.max_size, mesh.x_growth)
     basis = Basis(mesh, ElementVector(ElementQuadS2()), intorder=4)
     Kf, Mf, strain_energy, kinetic_energy = plane_stress_forms(E, nu, rho, thickness)
     K = Kf.assemble(basis).tocsr()

@@ -1,0 +1,145 @@
+"""Solids too large for all modes (beyond `solid.modal.DENSE_LIMIT` DOFs): sparse-direct Newmark
+(A1)-(A2) for the solid, stepped from Python, around the same compiled interface iteration
+(`core.interface_solve`) and step policy as the modal solver.
+
+With S(h) = M + K h^2/4, Newmark gives a_{s+1} = a_pred + S^-1 B' F_{s+1}, where B picks the
+contact points' (x, y) displacements from the reduced DOFs. Per step size we factor S once and
+keep Z = S^-1 B' (ndof x 2nc) and C = B Z (2nc x 2nc): an interface iteration then costs a
+2nc-vector product instead of a sparse solve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..granular.system import GranularState, GranularSystem, Stepper
+from ..solid.base import SolidModel
+from ..solid.newmark import Newmark, NewmarkState
+from . import core
+from .solver import SolverError, SolverSettings, contact_frame, observation
+
+
+@dataclass
+class StepOperators:
+    h: float
+    Z: np.ndarray  # (ndof, 2nc): S^-1 B'
+    C: np.ndarray  # (2nc, 2nc): B S^-1 B'
+    ct: np.ndarray  # (nc,): t' C_kk t, the tangential compliance of (A8)
+
+
+class SparseSolver:
+    """The coupled step with sparse Newmark; same driver interface as `solver.ModalSolver`."""
+
+    def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
+                 outputs_every: int):
+        self.system, self.model, self.settings = system, model, settings
+        self.y0 = state0.y.copy()
+        self.stepper = Stepper(system, substep=True)
+        self.newmark = Newmark(model.M, model.K)
+        self.B = model.contact_map()
+        self.Bt = self.B.T.tocsc()
+        self.frame = contact_frame(system, model)
+        self.cfg = settings.config(self.stepper.max_disp)
+        self.per_ticks = outputs_every * 2**settings.halvings
+        self._ops: dict[int, StepOperators] = {}
+        self.work = core.iter_work(self.y0, len(system.solid_contacts))
+
+    @property
+    def name(self) -> str:
+        return self.settings.method
+
+    def operators(self, level: int) -> StepOperators:
+        ops = self._ops.get(level)
+        if ops is None:
+            h = self.settings.dt / 2**level
+            Z = self.newmark.factor(h).solve(self.Bt.toarray())
+            C = np.ascontiguousarray(self.B @ Z)
+            t = self.frame.tangent
+            ct = np.array([t[k] @ C[2 * k:2 * k + 2, 2 * k:2 * k + 2] @ t[k] if self.frame.has_tangent[k] else 0.0
+                           for k in range(len(t))])
+            ops = self._ops[level] = StepOperators(h, Z, C, ct)
+        return ops
+
+    def _cache(self, levels: int) -> core.StepCache:
+        """A StepCache with the tangential compliances of levels 0..levels-1 (for `core.step_level`)."""
+        H = self.settings.halvings
+        nc = len(self.frame.tangent)
+        cache = core.StepCache(np.zeros(H + 1, bool), np.zeros((H + 1, 0)), np.zeros((H + 1, 2 * nc, 2 * nc)), np.zeros((H + 1, nc)))
+        for n in range(levels):
+            cache.ct[n] = self.operators(n).ct
+            cache.ready[n] = True
+        return cache
+
+    # ------------------------------------------------------------ state
+    def start(self) -> None:
+        nc = len(self.frame.tangent)
+        self.sol = self.newmark.initial()
+        z = np.zeros(nc)
+        # the policy reads normal, vrel and ticks from a CoupledState (modal parts empty)
+        self.st = core.CoupledState(self.y0.copy(), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((nc, 2)), np.zeros(2 * nc),
+                                    np.zeros(2 * nc), np.zeros(2 * nc), z, z.copy(), np.zeros(1), np.zeros(3, np.int64))
+
+    def save(self) -> dict:
+        out = {f"st:{k}": np.asarray(v) for k, v in self.st._asdict().items()}
+        out.update({"sx": self.sol.x, "sv": self.sol.v, "sa": self.sol.a, "ref_pos": self.stepper.nl.ref_pos})
+        return out
+
+    def load(self, arrays: dict) -> None:
+        self.st = core.CoupledState(*[np.array(arrays[f"st:{k}"]) for k in core.CoupledState._fields])
+        self.sol = NewmarkState(np.array(arrays["sx"]), np.array(arrays["sv"]), np.array(arrays["sa"]), self.t)
+        self.stepper.refresh(arrays["ref_pos"])
+
+    @property
+    def t(self) -> float:
+        return float(self.st.clock[0])
+
+    # ------------------------------------------------------------ stepping
+    def advance(self, k: int, trajectory) -> None:
+        st, s = self.st, self.settings
+        H = s.halvings
+        st.ticks[2] = 0
+        target = k * self.per_ticks
+        lam = np.zeros(len(self.frame.tangent))
+        cache = self._cache(H + 1 if s.method == "paper" else 1)
+        while st.ticks[0] < target:
+            if not cache.ready[st.ticks[2]]:
+                cache = self._cache(int(st.ticks[2]) + 1)
+            level = core.step_level(st, self.stepper.model.law, cache, core.ModalSolid(np.zeros(0), np.zeros((0, 0)), self.frame), self.cfg, target - st.ticks[0], lam)
+            if level < 0:
+                raise SolverError(f"t = {self.t:.6e} s: (B1) needs more than {H} halvings of {s.dt:.3e} s")
+            ops = self.operators(level)
+            a_pred = self.newmark.predictor(self.sol, ops.h)
+            pred = core.Prediction(self.B @ self.sol.x, self.B @ self.sol.v, self.B @ self.sol.a, self.B @ a_pred)
+            status, its = core.interface_solve(st.y, self.t, ops.h, self.stepper.model, pred, ops.C, st.F, self.cfg, self.frame, self.work)
+            if status != core.CONVERGED:
+                if self.cfg.retry and st.ticks[2] < H:
+                    st.ticks[2] += 1
+                    continue
+                raise SolverError(f"t = {self.t:.6e} s: the interface forces did not converge at dt = {ops.h:.3e} s; reduce "
+                                  "simulation.dt, raise simulation.max_halvings or simulation.max_iterations, or lower k_s")
+            self.sol = Newmark.finish(self.sol, a_pred + ops.Z @ st.F.ravel(), ops.h)
+            st.y[:] = self.work.ytr
+            st.normal[:] = self.work.iface.normal
+            st.vrel[:] = self.work.iface.vrel
+            st.clock[0] += ops.h
+            st.ticks[0] += 2 ** (H - level)
+            st.ticks[1] = level
+            trajectory.log_steps([self.t], [ops.h], [its], lam[None, :])
+            self.stepper.maybe_refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
+
+    # ------------------------------------------------------------ what the driver records
+    def observe(self) -> dict:
+        nc = len(self.frame.tangent)
+        su = (self.B @ self.sol.x).reshape(nc, 2)
+        return observation(self.stepper, GranularState(self.st.y, self.t), su, self.model.energy(self.sol.x, self.sol.v),
+                           self.st.F, self.frame.tangent, self.system)
+
+    def solid_snapshot(self) -> dict:
+        return {"q": self.sol.x.astype(np.float32), "v": self.sol.v.astype(np.float32)}
+
+    def attributes(self) -> dict:
+        s = self.settings
+        return {"name": f"{s.method}-sparse", "dt0": s.dt, "abstol": s.abstol, "reltol": s.reltol, "lambda_max": s.lambda_max,
+                "max_halvings": s.halvings, "neighbour_rebuilds": self.stepper.rebuilds, "solid_representation": "nodal"}

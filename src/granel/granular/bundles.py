@@ -1,0 +1,120 @@
+"""Typed bundles of the arrays the compiled kernels read (numba accepts these NamedTuples as one
+argument each, and caches the compiled code).
+
+The granular state y (n granules, float64) is laid out once, here:
+    y[0:2n]     centre positions, interleaved (x0, y0, x1, y1, ...)
+    y[2n:3n]    rotations theta
+    y[3n:5n]    velocities, interleaved
+    y[5n:6n]    spins omega
+    y[6n:6n+3]  accumulated viscous dissipation, friction dissipation and input work, so that RK4
+                integrates the energy balance (13) at its own order.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
+
+
+def state_size(n: int) -> int:
+    return 6 * n + 3
+
+
+class Granules(NamedTuple):
+    radius: np.ndarray  # (n,)
+    mass: np.ndarray
+    inertia: np.ndarray
+
+
+class Law(NamedTuple):
+    """Eq. (5)'s friction coefficient and tanh smoothness."""
+
+    mu: float
+    k_s: float
+
+
+class Pairs(NamedTuple):
+    """Granule-granule candidate contacts with their Hertz (A) and damping (G) coefficients, eq. (3)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    A: np.ndarray
+    G: np.ndarray
+
+
+class Walls(NamedTuple):
+    """Granule-wall candidates (granule g, wall w, A, G) and the walls' geometry (per wall)."""
+
+    g: np.ndarray
+    w: np.ndarray
+    A: np.ndarray
+    G: np.ndarray
+    p0: np.ndarray  # (nw, 2) start point
+    tangent: np.ndarray  # (nw, 2) unit vector from p0 to p1
+    length: np.ndarray  # (nw,)
+    normal: np.ndarray  # (nw, 2) unit normal into the granular side
+
+
+class Points(NamedTuple):
+    """Granule-solid contact points: granule g, rest position p, unit normal n (granule -> solid)."""
+
+    g: np.ndarray
+    p: np.ndarray  # (nc, 2)
+    n: np.ndarray  # (nc, 2)
+    A: np.ndarray
+    G: np.ndarray
+
+
+class Loads(NamedTuple):
+    """Applied forces: granule g, unit direction, history kind and parameters, tabulated values."""
+
+    g: np.ndarray
+    direction: np.ndarray  # (ne, 2)
+    kind: np.ndarray
+    params: np.ndarray  # (ne, 4)
+    offset: np.ndarray  # (ne + 1,) into tab_t / tab_v
+    tab_t: np.ndarray
+    tab_v: np.ndarray
+
+
+class GranularModel(NamedTuple):
+    """Everything the right-hand side of eq. (1) reads, besides the state and the solid's motion."""
+
+    granules: Granules
+    law: Law
+    pairs: Pairs
+    walls: Walls
+    points: Points
+    loads: Loads
+
+
+class Motion(NamedTuple):
+    """The solid contact points' motion inside a step, u(tau) = u0 + v0 tau + a tau^2 / 2, (nc, 2)
+    each: the constant-average-acceleration interpolation (A3); zero for a rigid solid."""
+
+    u0: np.ndarray
+    v0: np.ndarray
+    a: np.ndarray
+
+
+def still(nc: int) -> Motion:
+    z = np.zeros((nc, 2))
+    return Motion(z, z, z)
+
+
+class InterfaceForces(NamedTuple):
+    """Filled by `kernels.interface_forces`: forces on the solid at its contact points, |N|, the
+    relative tangential velocity, and d(force)/d(displacement), d(force)/d(velocity) per point."""
+
+    F: np.ndarray  # (nc, 2)
+    normal: np.ndarray  # (nc,)
+    vrel: np.ndarray  # (nc,)
+    Du: np.ndarray  # (nc, 2, 2)
+    Dw: np.ndarray  # (nc, 2, 2)
+
+
+def interface_buffers(nc: int) -> InterfaceForces:
+    return InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))

@@ -1,0 +1,66 @@
+"""The one contact law of granel, eqs. (2), (3) and (5): force, potential and the derivatives
+Newton needs, side by side. Every contact (granule-granule, granule-wall, granule-solid point)
+and every solver calls these functions; tests check the derivatives against finite differences.
+
+Variables of a contact: overlap delta > 0 (eq. 2), overlap rate ddelta = d(delta)/dt, relative
+tangential velocity vt (eq. 6), Hertz coefficient A = 4/3 E* sqrt(R*) and damping prefactor
+G = alpha_n sqrt(m* A) (eq. 3, so that gamma = G delta^(1/4)), friction mu and smoothness k_s.
+Sign conventions: fn > 0 repels; ft is the tangential force along t = k x n on the body whose
+relative velocity vt is, so ft opposes vt.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def hertz_tsuji_normal(A, G, delta, ddelta):
+    """Eqs. (2)-(3): normal force magnitude fn = A delta^(3/2) + gamma ddelta (repulsive > 0) and
+    the damping coefficient gamma = G delta^(1/4)."""
+    gam = G * math.sqrt(math.sqrt(delta))
+    return A * delta * math.sqrt(delta) + gam * ddelta, gam
+
+
+@njit(cache=True, inline="always")
+def tanh_friction(fn, vt, mu, k_s):
+    """Eq. (5): ft = -mu |N| tanh(k_s vt)."""
+    return -mu * abs(fn) * math.tanh(k_s * vt)
+
+
+@njit(cache=True, inline="always")
+def contact_law(A, G, delta, ddelta, vt, mu, k_s):
+    """Eqs. (2), (3), (5) for delta > 0: (fn, ft, gamma)."""
+    fn, gam = hertz_tsuji_normal(A, G, delta, ddelta)
+    return fn, tanh_friction(fn, vt, mu, k_s), gam
+
+
+@njit(cache=True, inline="always")
+def hertz_potential(A, delta):
+    """The elastic energy of a contact, 2/5 A delta^(5/2) (eq. 11 shares it between the bodies);
+    its derivative is the elastic part of fn."""
+    return 0.4 * A * delta * delta * math.sqrt(delta)
+
+
+@njit(cache=True, inline="always")
+def contact_law_derivatives(A, G, delta, ddelta, vt, mu, k_s):
+    """Partial derivatives of (fn, ft) of `contact_law` with respect to (delta, ddelta, vt):
+    (dfn/ddelta, dfn/dddelta, dft/ddelta, dft/dddelta, dft/dvt). The fn-derivatives of
+    |fn| carry its sign (fn < 0 only under strong separation damping)."""
+    q = math.sqrt(math.sqrt(delta))  # delta^(1/4)
+    dfn_d = 1.5 * A * math.sqrt(delta) + 0.25 * G * ddelta / (q * q * q)
+    dfn_dd = G * q
+    fn = A * delta * math.sqrt(delta) + G * q * ddelta
+    th = math.tanh(k_s * vt)
+    s = -mu * th * (1.0 if fn >= 0.0 else -1.0)  # d ft / d fn
+    return dfn_d, dfn_dd, s * dfn_d, s * dfn_dd, -mu * abs(fn) * k_s * (1.0 - th * th)
+
+
+@njit(cache=True, inline="always")
+def friction_eigenvalue(mu, k_s, normal, vt, h, c_t):
+    """(10)/(A9): |lambda| = 1/2 mu k_s |N| h c_t / cosh^2(k_s vt), with c_t = T (M + K h^2/4)^-1 T'
+    the tangential compliance of the contact point over a step h."""
+    th = math.tanh(k_s * vt)
+    return 0.5 * mu * k_s * abs(normal) * h * c_t * (1.0 - th * th)

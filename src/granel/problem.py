@@ -1,0 +1,23 @@
+"""The built problem: what the solvers receive (never the scenario itself)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .coupling.driver import Schedule
+from .coupling.solver import SolverSettings
+from .granular.system import GranularState, GranularSystem
+from .solid.base import SolidModel
+
+
+@dataclass
+class Problem:
+    """The granular system and its initial state, the solid model (rigid, beam or plate), the
+    solver settings and the output schedule, and the scenario's text (stored with the results)."""
+
+    system: GranularSystem
+    state: GranularState
+    solid: SolidModel
+    settings: SolverSettings
+    schedule: Schedule
+    source: str = ""  # the scenario as TOML

@@ -1,0 +1,220 @@
+"""Scenario -> built objects: the granular media and system, the solid model, the solver settings
+and the output schedule (`build_problem`), with the whole-scenario checks that need the built
+geometry (`check_scenario`). Nothing below this layer sees the scenario."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..coupling.driver import Schedule
+from ..coupling.solver import SolverSettings
+from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
+from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
+from ..materials import effective_modulus
+from ..problem import Problem
+from ..solid.base import SolidModel, rigid_solid
+from ..solid.beam import build_beam
+from ..solid.plate import LayerSpec, PlateMesh, build_plate
+from .files import to_toml
+from .schema import ExcitationSpec, Scenario, ScenarioError
+
+# Hertz impact: contact duration = HERTZ_DURATION * delta_max / v = 2 (2/5) B(2/5, 1/2) delta_max / v
+HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
+
+
+def build_media(sc: Scenario, base: Path | None = None):
+    solid = sc.solid
+    media = []
+    for k, m in enumerate(sc.media):
+        mat = sc.materials[m.material].material()
+        if m.granules_file:
+            path = Path(m.granules_file)
+            if base is not None and not path.is_absolute():
+                path = base / path
+            try:
+                rows = read_granules_csv(path)
+                med = medium_from_table(m.name, rows, mat, m.side, {k: v.material() for k, v in sc.materials.items()})
+            except (OSError, ValueError, KeyError) as e:
+                raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: {e}") from None
+            if np.any(med.radius <= 0):
+                raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: radius must be positive")
+        else:
+            if solid is not None:
+                face = solid.x0 if m.side == "left" else solid.x0 + solid.width
+                cy = m.center_y if m.center_y is not None else solid.y0 + 0.5 * solid.length
+            else:
+                face = 0.0
+                cy = m.center_y if m.center_y is not None else 0.0
+            try:
+                med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, cy, m.labels,
+                                        m.channel_walls, m.outer_wall, m.gap)
+            except ValueError as e:
+                raise ScenarioError(f"media.{k}: {e}") from None
+        media.append(med)
+    return media
+
+
+def solid_contacts_for(sc: Scenario, media) -> list:
+    """Contact points of the solid: the granules of column 0 of each medium beside the solid
+    whose centre lies within the solid's length, at the face point nearest to the centre."""
+    if sc.solid is None:
+        return []
+    s = sc.solid
+    out, offset = [], 0
+    for med in media:
+        if med.side in ("left", "right"):
+            face = s.x0 if med.side == "left" else s.x0 + s.width
+            nrm = (1.0, 0.0) if med.side == "left" else (-1.0, 0.0)
+            for g in range(med.n):
+                x, y = med.pos[g]
+                R = med.radius[g]
+                dist = (face - x) * nrm[0]
+                if s.y0 < y < s.y0 + s.length and dist < R * (1 + 1e-9) + 1e-12 and dist > 0:
+                    out.append(SolidContact(offset + g, (face, float(y)), nrm, f"{med.name}:{med.labels[g]}"))
+        offset += med.n
+    return out
+
+
+def excitation_direction(spec: ExcitationSpec, side: str) -> tuple[float, float]:
+    if isinstance(spec.direction, tuple):
+        return spec.direction
+    toward = (1.0, 0.0) if side == "left" else (-1.0, 0.0)
+    if side not in ("left", "right"):
+        raise ScenarioError(f"excitation on {spec.granule}: direction 'toward_solid' needs a medium beside the solid; give a vector")
+    return toward if spec.direction == "toward_solid" else (-toward[0], -toward[1])
+
+
+def build_granular(sc: Scenario, base: Path | None = None):
+    """Scenario -> (GranularSystem with its solid contact points at rest, initial state, media)."""
+    media = build_media(sc, base)
+    law = ContactLaw(sc.contact.mu, sc.contact.alpha_n, sc.contact.k_s)
+    labels = [f"{m.name}:{lab}" for m in media for lab in m.labels]
+    side_of = {f"{m.name}:{lab}": m.side for m in media for lab in m.labels}
+    exc = []
+    for k, e in enumerate(sc.excitations):
+        if e.granule not in labels:
+            raise ScenarioError(f"excitations.{k}.granule = {e.granule!r}: no such granule (e.g. {labels[0]!r})")
+        try:
+            hist = e.history(base)
+        except (OSError, ValueError) as err:
+            raise ScenarioError(f"excitations.{k}.file = {e.file!r}: {err}") from None
+        exc.append(Excitation(labels.index(e.granule), excitation_direction(e, side_of[e.granule]), hist))
+    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name) for w in sc.walls]
+    system = build_system(media, law, solid_contacts_for(sc, media), exc, walls)
+    vel = np.zeros((system.n, 2))
+    om = np.zeros(system.n)
+    for k, iv in enumerate(sc.initial_velocities):
+        if iv.granule not in labels:
+            raise ScenarioError(f"initial_velocities.{k}.granule = {iv.granule!r}: no such granule")
+        g = labels.index(iv.granule)
+        vel[g] = iv.v
+        om[g] = iv.omega
+    return system, initial_state(system, vel, om), media
+
+
+def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
+    """An upper bound for the RK4 step: 1/20 of the shortest Hertz collision time expected
+    (granule pairs of each size and granule-wall impacts at the largest speed an excitation
+    can impart, impulse / mass), and 1/10 of the shortest pulse duration."""
+    bounds = []
+    speed = init_speed
+    for e in excitations:
+        m = system.mass[e.granule]
+        J = e.history.peak_impulse()
+        if math.isfinite(J) and J > 0:
+            speed = max(speed, J / m)
+        if e.history.kind == "half_sine":
+            bounds.append(e.history.params[1] / 10.0)
+        elif e.history.kind == "burst":
+            bounds.append(1.0 / (e.history.params[1] * 20.0))
+    if speed > 0 and system.n:
+        kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
+        for g in np.unique(kinds, axis=0, return_index=True)[1]:
+            R, m = system.radius[g], system.mass[g]
+            E2 = effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g])
+            Ew = effective_modulus(system.E[g], system.nu[g])
+            for (Es, Rs, ms) in ((E2, R / 2, m / 2), (Ew, R, m)):
+                A = 4.0 / 3.0 * Es * math.sqrt(Rs)
+                dmax = (5.0 * ms * speed**2 / (4.0 * A)) ** 0.4
+                bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
+    return min(bounds) if bounds else math.inf
+
+
+def check_scenario(sc: Scenario, base: Path | None = None) -> None:
+    """Whole-scenario checks that need the built geometry; the built system is kept on the
+    scenario for `build_problem`."""
+    system, state, media = build_granular(sc, base)
+    sc._built = (to_toml(sc), system, state, media)
+    # overlapping granules
+    pos, R = system.pos0, system.radius
+    if system.n > 1:
+        pairs = cKDTree(pos).query_pairs(2 * R.max(), output_type="ndarray")
+        if len(pairs):
+            i, j = pairs[:, 0], pairs[:, 1]
+            over = R[i] + R[j] - np.hypot(*(pos[j] - pos[i]).T)
+            bad = over > 1e-9 * np.minimum(R[i], R[j])
+            if bad.any():
+                k = int(np.argmax(over))
+                raise ScenarioError(
+                    f"media: granules {system.labels[i[k]]} and {system.labels[j[k]]} overlap by {over[k]:.3e} m "
+                    "(initial states must be free of compression)"
+                )
+    if sc.solid is not None:
+        s = sc.solid
+        inside = (pos[:, 0] + R > s.x0 + 1e-12) & (pos[:, 0] - R < s.x0 + s.width - 1e-12) & \
+                 (pos[:, 1] > s.y0) & (pos[:, 1] < s.y0 + s.length)
+        if inside.any():
+            g = int(np.flatnonzero(inside)[0])
+            raise ScenarioError(f"media: granule {system.labels[g]} overlaps the solid at x = {pos[g, 0]:.4g} m")
+    speed = max((math.hypot(*iv.v) for iv in sc.initial_velocities), default=0.0)
+    bound = safe_time_step(system, system.excitations, speed)
+    dt = sc.simulation.dt
+    if dt > bound:
+        raise ScenarioError(
+            f"simulation.dt = {dt:.3e} s: larger than the safe bound {bound:.3e} s "
+            "(1/20 of the shortest expected Hertz collision, 1/10 of the pulse)"
+        )
+    if sc.simulation.output_every < dt:
+        raise ScenarioError(f"simulation.output_every = {sc.simulation.output_every:.3e} s: shorter than dt = {dt:.3e} s")
+
+
+def build_solid(sc: Scenario, system) -> SolidModel:
+    """The scenario's solid; one contact point per granule-solid contact of `system`, in the
+    same order (names are the granule labels)."""
+    s = sc.solid
+    if s is None or s.kind == "rigid":
+        return rigid_solid([(c.name, c.point, c.normal) for c in system.solid_contacts])
+    mat = sc.materials[s.material]
+    edges = ["left" if c.normal[0] > 0 else "right" for c in system.solid_contacts]
+    if s.kind == "beam":
+        return build_beam(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.rho,
+                          [(c.name, e, c.point[1]) for c, e in zip(system.solid_contacts, edges)],
+                          s.beam_elements, tuple(s.clamped))
+    mesh = s.mesh
+    layers = [LayerSpec(c.name, e, c.point[1], mesh.layer_fraction * float(system.radius[c.granule]))
+              for c, e in zip(system.solid_contacts, edges)]
+    return build_plate(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho, layers,
+                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers), tuple(s.clamped))
+
+
+def solver_settings(sc: Scenario) -> SolverSettings:
+    sim = sc.simulation
+    return SolverSettings(sim.solver, sim.dt, sim.max_halvings, sim.lambda_max, sim.abstol, sim.reltol, sim.max_iterations)
+
+
+def schedule(sc: Scenario) -> Schedule:
+    sim = sc.simulation
+    return Schedule(sim.duration, sim.dt, sim.output_every, sim.solid_output_every, sim.checkpoint_every)
+
+
+def build_problem(sc: Scenario) -> Problem:
+    """Everything a solver needs, built once (the granular system from validation is reused)."""
+    text = to_toml(sc)
+    built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
+    system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
+    state = type(state)(state.y.copy(), state.t)
+    return Problem(system, state, build_solid(sc, system), solver_settings(sc), schedule(sc), text)

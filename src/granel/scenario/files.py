@@ -1,0 +1,90 @@
+"""Scenario input: built-in names and TOML files, `key.path=value` overrides, TOML output."""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import tomli_w
+from pydantic import ValidationError
+
+from .schema import Scenario, ScenarioError
+
+
+def _format_validation_error(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(scenario)"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown field"
+        inp = e.get("input")
+        shown = repr(inp) if not isinstance(inp, dict) else "{...}"
+        if len(shown) > 80:
+            shown = shown[:77] + "..."
+        lines.append(f"{loc} = {shown}: {msg}")
+    return "invalid scenario:\n  " + "\n  ".join(lines)
+
+
+def builtin_names() -> list[str]:
+    return [p.name[:-5] for p in resources.files("granel.scenario").joinpath("builtin").iterdir() if p.name.endswith(".toml")]
+
+
+def load_raw(source: str | Path) -> tuple[dict, Path | None]:
+    """TOML text of a built-in name or a file -> (dict, base directory for relative paths)."""
+    src = str(source)
+    if src in builtin_names():
+        text = resources.files("granel.scenario").joinpath("builtin").joinpath(f"{src}.toml").read_text()
+        return tomllib.loads(text), None
+    path = Path(src)
+    if not path.exists():
+        raise ScenarioError(f"scenario {src!r}: no such file and not a built-in ({', '.join(builtin_names())})")
+    try:
+        return tomllib.loads(path.read_text()), path.parent
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: not valid TOML: {e}") from None
+
+
+def _coerce(text: str):
+    """A CLI override value: TOML literal if it parses, else a plain string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_overrides(raw: dict, overrides: list[str]) -> dict:
+    """Apply `a.b.c=value` overrides (list indices as numbers: media.1.radius=0.006)."""
+    raw = copy.deepcopy(raw)
+    for item in overrides:
+        if "=" not in item:
+            raise ScenarioError(f"override {item!r}: expected key=value, e.g. contact.mu=0.2")
+        key, val = item.split("=", 1)
+        parts = key.strip().split(".")
+        node = raw
+        for p in parts[:-1]:
+            if isinstance(node, list):
+                try:
+                    node = node[int(p)]
+                except (ValueError, IndexError):
+                    raise ScenarioError(f"override {key!r}: no list item {p!r}") from None
+            else:
+                node = node.setdefault(p, {})
+        last = parts[-1]
+        if isinstance(node, list):
+            try:
+                node[int(last)] = _coerce(val)
+            except (ValueError, IndexError):
+                raise ScenarioError(f"override {key!r}: no list item {last!r}") from None
+        else:
+            node[last] = _coerce(val.strip())
+    return raw
+
+
+def to_toml(sc: Scenario) -> str:
+    data = sc.model_dump(mode="json", exclude_none=True)
+    return tomli_w.dumps(data)
+
+

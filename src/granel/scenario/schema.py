@@ -1,0 +1,246 @@
+"""The scenario schema (pydantic): every field, its type, range and default. Field-level
+validation happens here; whole-scenario checks that need the built geometry in `scenario.build`."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
+
+from ..excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, constant_force, half_sine, harmonic_burst, read_force_csv
+from ..materials import Material
+from ..units import parse_time
+
+
+class ScenarioError(ValueError):
+    """An invalid scenario; the message names the field and the value."""
+
+
+def _time(v):
+    try:
+        return parse_time(v)
+    except ValueError as e:
+        raise ValueError(str(e)) from None
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class SimulationSpec(_Strict):
+    duration: float = 8e-4
+    dt: float = 4e-8
+    output_every: float = 1e-6
+    solver: Literal["paper", "fast"] = "fast"  # coupled solver
+    abstol: float = Field(1e-6, gt=0, description="absolute tolerance of eq. (A4) [N]")
+    reltol: float = Field(1e-6, gt=0, description="relative tolerance of eq. (A4)")
+    max_iterations: int = Field(50, ge=1)
+    lambda_max: float = Field(0.5, gt=0, lt=1, description="B1: halve the step until max|lambda| <= this")
+    max_halvings: int = Field(12, ge=0)
+    checkpoint_every: float = 0.0
+    solid_output_every: float = Field(0.0, description="interval of stored solid states (0: output_every)")
+
+    @field_validator("duration", "dt", "output_every", "checkpoint_every", "solid_output_every", mode="before")
+    @classmethod
+    def _parse(cls, v):
+        return _time(v)
+
+    @field_validator("duration", "dt", "output_every")
+    @classmethod
+    def _positive(cls, v):
+        if not v > 0 or not math.isfinite(v):
+            raise ValueError(f"must be a positive time, got {v!r}")
+        return v
+
+
+class ContactSpec(_Strict):
+    mu: float = Field(0.099, ge=0, le=10)
+    alpha_n: float = Field(6.313e-3, ge=0)
+    k_s: float = Field(100.0, gt=0)
+
+
+class MaterialSpec(_Strict):
+    E: float = Field(gt=0, description="Young's modulus [Pa]")
+    rho: float = Field(gt=0, description="density [kg/m^3]")
+    nu: float = Field(gt=-1, lt=0.5, description="Poisson's ratio")
+
+    def material(self) -> Material:
+        return Material(self.E, self.rho, self.nu)
+
+
+class PlateMeshSpec(_Strict):
+    nx: int = Field(6, ge=2, description="elements across the width")
+    layer_elements: int = Field(2, ge=2, le=2, description="elements on each rigid layer (the paper: 2)")
+    growth: float = Field(1.6, gt=1.0, le=3.0, description="element size growth ratio away from contacts")
+    max_size: float = Field(2.0e-3, gt=0, description="largest element size along the length [m]")
+    x_growth: float = Field(1.5, ge=1.0, le=3.0, description="element width growth from the edges to the mid-line")
+    layer_fraction: float = Field(0.1, gt=0, lt=1, description="rigid layer length / granule radius (paper: 1/10)")
+    rigid_layers: bool = True
+
+
+class SolidSpec(_Strict):
+    kind: Literal["plate", "beam", "rigid"] = "plate"
+    material: str = "steel"
+    x0: float = 0.0
+    y0: float = 0.0
+    width: float = Field(0.01, gt=0)
+    length: float = Field(0.1, gt=0)
+    thickness: float = Field(0.001, gt=0)
+    beam_elements: int = Field(40, ge=2)
+    mesh: PlateMeshSpec = PlateMeshSpec()
+    clamped: tuple[bool, bool] = (True, True)
+
+
+class MediumSpec(_Strict):
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")
+    side: Literal["left", "right", "none"] = "left"
+    radius: float | None = Field(None, gt=0)
+    material: str = "steel"
+    columns: list[Annotated[int, Field(ge=1)]] | None = None
+    center_y: float | None = None
+    labels: Union[Literal["numeric", "alpha"], list[str]] = "numeric"
+    channel_walls: bool = True
+    outer_wall: bool = False
+    gap: float = Field(0.0, ge=0)
+    granules_file: str | None = None
+
+    @model_validator(mode="after")
+    def _shape(self):
+        if self.granules_file is None:
+            if self.columns is None or self.radius is None:
+                raise ValueError("a medium needs either 'columns' and 'radius' (hexagonal packing) or 'granules_file'")
+            if self.side == "none":
+                raise ValueError("a hexagonal packing needs side = 'left' or 'right' of the solid")
+        return self
+
+
+class WallSpec(_Strict):
+    p0: tuple[float, float]
+    p1: tuple[float, float]
+    normal: tuple[float, float]
+    medium: str = ""
+    name: str = ""
+
+    @model_validator(mode="after")
+    def _nondegenerate(self):
+        if math.hypot(self.p1[0] - self.p0[0], self.p1[1] - self.p0[1]) <= 0:
+            raise ValueError(f"wall has zero length: p0 = p1 = {self.p0}")
+        if math.hypot(*self.normal) <= 0:
+            raise ValueError("wall normal must be non-zero")
+        return self
+
+
+class ExcitationSpec(_Strict):
+    granule: str = Field(min_length=1)
+    kind: Literal["half_sine", "burst", "table", "constant"] = "half_sine"
+    shock: Literal["weak", "moderate", "strong"] | None = None
+    fmax: float | None = None
+    tau: float = PAPER_TAU
+    t0: float = 0.0
+    amplitude: float | None = None
+    frequency: float | None = Field(None, gt=0)
+    cycles: float | None = Field(None, gt=0)
+    value: float | None = None
+    file: str | None = None
+    direction: Union[Literal["toward_solid", "away_from_solid"], tuple[float, float]] = "toward_solid"
+
+    @field_validator("tau", "t0", mode="before")
+    @classmethod
+    def _parse(cls, v):
+        return _time(v)
+
+    @field_validator("tau")
+    @classmethod
+    def _tau_pos(cls, v):
+        if not v > 0:
+            raise ValueError(f"must be a positive time, got {v!r}")
+        return v
+
+    @field_validator("direction")
+    @classmethod
+    def _dir(cls, v):
+        if isinstance(v, tuple) and math.hypot(*v) == 0:
+            raise ValueError("direction vector must be non-zero")
+        return v
+
+    @model_validator(mode="after")
+    def _needs(self):
+        if self.kind == "half_sine":
+            if self.fmax is None and self.shock is None:
+                raise ValueError("a half_sine needs 'fmax' [N] or 'shock' (weak | moderate | strong)")
+        elif self.kind == "burst":
+            for f in ("amplitude", "frequency", "cycles"):
+                if getattr(self, f) is None:
+                    raise ValueError(f"a burst needs '{f}'")
+        elif self.kind == "table":
+            if self.file is None:
+                raise ValueError("a table excitation needs 'file' (CSV of time,force)")
+        elif self.kind == "constant" and self.value is None:
+            raise ValueError("a constant excitation needs 'value' [N]")
+        return self
+
+    def peak_force(self) -> float:
+        if self.kind == "half_sine":
+            return abs(self.fmax if self.fmax is not None else SHOCK_LEVELS[self.shock])
+        if self.kind == "burst":
+            return abs(self.amplitude)
+        if self.kind == "constant":
+            return abs(self.value)
+        return float("nan")
+
+    def history(self, base: Path | None = None) -> LoadHistory:
+        if self.kind == "half_sine":
+            fmax = self.fmax if self.fmax is not None else SHOCK_LEVELS[self.shock]
+            return half_sine(fmax, self.tau, self.t0)
+        if self.kind == "burst":
+            return harmonic_burst(self.amplitude, self.frequency, self.cycles, self.t0)
+        if self.kind == "constant":
+            return constant_force(self.value)
+        path = Path(self.file)
+        if base is not None and not path.is_absolute():
+            path = base / path
+        return read_force_csv(path)
+
+
+class InitialVelocitySpec(_Strict):
+    granule: str
+    v: tuple[float, float] = (0.0, 0.0)
+    omega: float = 0.0
+
+
+class Scenario(_Strict):
+    name: str = "scenario"
+    description: str = ""
+    simulation: SimulationSpec = SimulationSpec()
+    contact: ContactSpec = ContactSpec()
+    materials: dict[str, MaterialSpec] = Field(default_factory=lambda: {"steel": MaterialSpec(E=200e9, rho=7850.0, nu=0.3)})
+    solid: SolidSpec | None = SolidSpec()
+    media: list[MediumSpec] = Field(min_length=1)
+    walls: list[WallSpec] = Field(default_factory=list)
+    excitations: list[ExcitationSpec] = Field(default_factory=list)
+    initial_velocities: list[InitialVelocitySpec] = Field(default_factory=list)
+    _base: Path | None = PrivateAttr(None)  # directory that relative file paths refer to
+    _built: tuple | None = PrivateAttr(None)  # (system, state, media) built by the checks
+
+    @property
+    def base(self) -> Path | None:
+        return self._base
+
+    @model_validator(mode="after")
+    def _references(self):
+        names = [m.name for m in self.media]
+        if len(set(names)) != len(names):
+            raise ValueError(f"media names must be unique, got {names}")
+        for k, m in enumerate(self.media):
+            if m.material not in self.materials:
+                raise ValueError(f"media.{k}.material: unknown material {m.material!r}; defined: {sorted(self.materials)}")
+        if self.solid is not None and self.solid.material not in self.materials:
+            raise ValueError(f"solid.material: unknown material {self.solid.material!r}; defined: {sorted(self.materials)}")
+        for k, w in enumerate(self.walls):
+            if w.medium and w.medium not in names:
+                raise ValueError(f"walls.{k}.medium: unknown medium {w.medium!r}; defined: {names}")
+        return self
+
+
