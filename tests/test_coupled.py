@@ -26,19 +26,21 @@ def norm_energies(ds):
     return np.vstack([ds["energy_lsgm"].values, ds["energy_ssgm"].values, ds["energy_solid"].values]) / w
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=["-".join(c) for c in CASES])
 def test_energy_balance_all_twelve_cases(twelve, case):
     ds = twelve[case]
     w = ds["input_work"].values
     assert ds["time"].values[-1] == pytest.approx(8e-4)
     assert np.abs(ds["balance_error"].values).max() < 1e-3 * w.max()  # issue: 0.1 % at every output
-    assert np.abs(ds["balance_error"].values).max() < 1e-5 * w.max()  # measured: <= 2e-6
+    assert np.abs(ds["balance_error"].values).max() < 1e-5 * w.max()  # measured: <= 3.1e-6 (walled)
     # energy reached the solid and crossed it
     assert ds["energy_solid"].values.max() > 1e-3 * w.max()
     far = "energy_ssgm" if case[1] == "LSGM:3" else "energy_lsgm"
     assert ds[far].values.max() > 1e-4 * w.max()
 
 
+@pytest.mark.slow
 def test_primary_wave_arrival_order(twelve):
     """The paper: the wave from the SSGM reaches the solid first; stronger shocks arrive earlier."""
     def arrival(ds, frac=0.01):
@@ -53,6 +55,7 @@ def test_primary_wave_arrival_order(twelve):
             assert t[0] > t[1] > t[2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solid, exc", [("plate", "LSGM:3"), ("plate", "SSGM:C"), ("beam", "LSGM:3"), ("beam", "SSGM:C")])
 def test_step_convergence_strong(twelve, solid, exc):
     """Halving dt0 changes every normalised energy curve by < 0.5 % of the input energy."""
@@ -77,6 +80,7 @@ def test_rigid_limit():
         assert stiff["energy_solid"].values.max() < 1e-2 * stiff["input_work"].values.max()
 
 
+@pytest.mark.slow
 def test_symmetric_shock_leaves_antisymmetric_beam_modes_unexcited(twelve):
     for exc in ("LSGM:3", "SSGM:C"):
         ds = twelve[("beam", exc, "strong")]
@@ -151,3 +155,16 @@ def test_sparse_newton_path_matches_the_modal_path():
     assert a.attrs["solver_name"] == "fast-sparse" and b.attrs["solver_name"] == "fast"
     assert a.attrs["solver_min_step"] == 4e-8  # no (A9) halving
     assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-8
+
+
+@pytest.mark.slow
+def test_paper_method_on_the_strong_ssgm_plate_case():
+    """The paper's algorithm, compiled, over the whole 0.8 ms of the hardest case: (13) closes,
+    (B1) holds at every step, and it agrees with the fast method (a different iteration and step on
+    the same discretisation) to 1e-3 of the input (measured 1.8e-4)."""
+    a = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.solver="paper"'))
+    b = run_scenario(paper("plate", "SSGM:C", "strong"))
+    w = a["input_work"].values.max()
+    assert np.abs(a["balance_error"].values).max() < 1e-6 * w
+    assert a["step_lambda"].values.max() <= 0.5 + 1e-6 and a.attrs["solver_min_step"] < 4e-8 / 2**7
+    assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-3

@@ -81,19 +81,14 @@ def _modes_of(ds, model):
 
 def solid_states(ds, times: np.ndarray, modes=None) -> tuple[np.ndarray, np.ndarray]:
     """The solid's reduced (q, v), shape (len(times), ndof) each, at the stored solid times
-    nearest to `times` (the rule of figures.solid_state_at, for all times at once)."""
-    st = ds["solid_time"].values
-    k = np.abs(st[None, :] - np.asarray(times, float)[:, None]).argmin(axis=1)
-    if "solid_x" in ds:
-        return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float)
-    if modes is None:
-        from .figures import model_of
+    nearest to `times` (`analysis.solid.reduced_states`, modes cached per process)."""
+    from .analysis.solid import reduced_states
+    from .figures import model_of
 
-        modes = _modes_of(ds, model_of(ds)[2])
-    phi = modes.shapes
-    eta = ds["solid_eta"].values[k].astype(float)
-    eta_dot = ds["solid_eta_dot"].values[k].astype(float)
-    return (phi @ eta.T).T, (phi @ eta_dot.T).T
+    model = model_of(ds)[2]
+    if modes is None and "solid_eta" in ds:
+        modes = _modes_of(ds, model)
+    return reduced_states(ds, times, model, modes)
 
 
 def granule_states(ds, idx: np.ndarray) -> np.ndarray:

@@ -47,7 +47,7 @@ def case_tag(case) -> str:
 def _modal_energy_history(ds):
     """(solid times, modal energies (nt, nm), omega) of a run, eq. (15)."""
     model = None
-    if "solid_x" in ds:  # a paper-solver result stores the reduced state: project on the modes
+    if "solid_x" in ds:  # a solid too large for all modes stores the reduced state: project it
         from .figures import model_of
 
         model = model_of(ds)[2]

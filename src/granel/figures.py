@@ -47,15 +47,11 @@ def model_of(ds):
 
 
 def solid_state_at(ds, time: float, modes=None):
-    """The solid's reduced (q, v) at the stored solid time closest to `time`."""
-    k = int(np.argmin(np.abs(ds["solid_time"].values - time)))
-    if "solid_x" in ds:
-        return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float), k
-    if modes is None:
-        from .solid.modal import all_modes
+    """The solid's reduced (q, v) at the stored solid time closest to `time`, and its index."""
+    from .analysis.solid import nearest_solid_outputs, reduced_states
 
-        modes = all_modes(model_of(ds)[2])
-    return modes.shapes @ ds["solid_eta"].values[k].astype(float), modes.shapes @ ds["solid_eta_dot"].values[k].astype(float), k
+    q, v = reduced_states(ds, [time], model_of(ds)[2], modes)
+    return q[0], v[0], int(nearest_solid_outputs(ds, [time])[0])
 
 
 def fig3_velocities(fwd, bwd, out, window=(4e-4, 8e-4)):

@@ -13,8 +13,8 @@ import numpy as np
 def modal_coordinates(ds, modes=None, model=None):
     """(times, X (nt, nm), Xdot (nt, nm), omega (nm)) from a result Dataset.
 
-    Results of the fast solver carry modal coordinates; those of the paper solver carry the
-    reduced state q, v, projected here on `modes` (built with `model` if not given)."""
+    Solids with all modes store modal coordinates (whichever method ran); a solid too large for
+    them stores the reduced state q, v, projected here on `modes` (of `model` if not given)."""
     t = ds["solid_time"].values
     if "solid_eta" in ds:
         return t, ds["solid_eta"].values.astype(float), ds["solid_eta_dot"].values.astype(float), ds["mode_omega"].values

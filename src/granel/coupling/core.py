@@ -201,40 +201,51 @@ def _newton_update(F, C, h, iface, w, tangent, has_tangent, mu, k_s):
 
 
 @njit(cache=True)
-def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
-    """Steps 2-6 of Appendix A for one step of size h from (y, t): iterate the interface forces F
-    (nc, 2; in: the guess, out: the converged forces) until (A4) holds. On success w.ytr holds
-    the granular state at t + h and w.iface the contact state there. Returns (status,
-    iterations); on failure F is left at its guess."""
+def interface_map(y, t, h, model, pred, C, F, rate, w, derivatives):
+    """The nonlinear map F -> G(F) of Appendix A, steps 2-5, whose fixed point is the step's
+    interface forces: the contacts' acceleration at s+1 under F (A2), their motion inside the
+    step (A3), RK4 for the granules under it, and the forces at s+1 (eqs. 2, 5). Leaves the
+    granular state at t + h in w.ytr and G(F) with |N|, v_t (and, with `derivatives`, dG/du and
+    dG/dw) in w.iface. Returns False if the granular state stopped being finite."""
     nc = F.shape[0]
-    m2 = 2 * nc
     mo = w.motion
+    for r in range(2 * nc):
+        acc = pred.a_pred[r]
+        for q in range(2 * nc):
+            acc += C[r, q] * F[q // 2, q % 2]
+        w.a1[r] = acc
+        c = r // 2
+        d = r % 2
+        ab = 0.5 * (pred.a[r] + acc)
+        mo.u0[c, d] = pred.u[r]
+        mo.v0[c, d] = pred.v[r]
+        mo.a[c, d] = ab
+        w.u1[c, d] = pred.u[r] + pred.v[r] * h + 0.5 * ab * h * h
+        w.v1[c, d] = pred.v[r] + ab * h
+    w.ytr[:] = y
+    if rk4_substepped(w.ytr, t, h, model, mo, rate, w.rk4) < 0:
+        return False
+    interface_forces(w.ytr, model, w.u1, w.v1, w.iface, derivatives)
+    return True
+
+
+@njit(cache=True)
+def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
+    """Step 6 of Appendix A for one step of size h from (y, t): iterate the interface forces F
+    (nc, 2; in: the guess, out: the converged forces) until (A4) holds, by the fixed point
+    F <- G(F) or by Newton. On success w.ytr holds the granular state at t + h and w.iface the
+    contact state there. Returns (status, iterations); on failure F is left at its guess."""
+    nc = F.shape[0]
+    w.F_start[:, :] = F
     for c in range(nc):
         for d in range(2):
-            mo.u0[c, d] = pred.u[2 * c + d]
-            mo.v0[c, d] = pred.v[2 * c + d]
-            w.F_start[c, d] = F[c, d]
-    rate = 1.5 * friction_rate(y, model, mo)  # forces may grow within the step
+            w.motion.u0[c, d] = pred.u[2 * c + d]
+    rate = 1.5 * friction_rate(y, model, w.motion)  # stiff friction: RK4 sub-steps (forces may grow in the step)
     law = model.law
     for it in range(1, cfg.max_iterations + 1):
-        # (A2) the contacts' acceleration at s+1 under F, (A3) the motion inside the step
-        for r in range(m2):
-            acc = pred.a_pred[r]
-            for q in range(m2):
-                acc += C[r, q] * F[q // 2, q % 2]
-            w.a1[r] = acc
-            c = r // 2
-            d = r % 2
-            ab = 0.5 * (pred.a[r] + acc)
-            mo.a[c, d] = ab
-            w.u1[c, d] = pred.u[r] + pred.v[r] * h + 0.5 * ab * h * h
-            w.v1[c, d] = pred.v[r] + ab * h
-        # step 4: the granules under that motion; step 5: the forces at s+1
-        w.ytr[:] = y
-        if rk4_substepped(w.ytr, t, h, model, mo, rate, w.rk4) < 0:
+        if not interface_map(y, t, h, model, pred, C, F, rate, w, cfg.newton):
             F[:, :] = w.F_start
             return NON_FINITE, it
-        interface_forces(w.ytr, model, w.u1, w.v1, w.iface, cfg.newton)
         G = w.iface.F
         if frame.fixed:  # the points do not move: G does not depend on F
             F[:, :] = G

@@ -232,6 +232,24 @@ def rk4_step(y, t, h, model, motion, tau0, work):
 
 
 @njit(cache=True)
+def overlaps(y, model, su):
+    """Overlaps of every candidate contact (pairs, walls, solid points displaced by su), eq. (2);
+    <= 0 where the bodies do not touch."""
+    radius = model.granules.radius
+    pairs, walls, points = model.pairs, model.walls, model.points
+    dp = np.empty(pairs.i.shape[0])
+    for c in range(dp.shape[0]):
+        dp[c] = pair_overlap(y, pairs.i[c], pairs.j[c], radius)[3]
+    dw = np.empty(walls.g.shape[0])
+    for c in range(dw.shape[0]):
+        dw[c] = wall_overlap(y, walls.g[c], walls.w[c], radius, walls)
+    ds = np.empty(points.g.shape[0])
+    for c in range(ds.shape[0]):
+        ds[c] = point_overlap(y, points.g[c], c, radius, points, su[c, 0], su[c, 1])
+    return dp, dw, ds
+
+
+@njit(cache=True)
 def friction_rate(y, model, motion):
     """The largest decay rate of relative sliding in the tanh law's viscous regime,
     mu k_s |N| / m_eff with 1/m_eff = sum 1/m + R^2/I over the bodies in contact [1/s] (eq. 5);
@@ -239,27 +257,19 @@ def friction_rate(y, model, motion):
     gr = model.granules
     radius, mass, inertia = gr.radius, gr.mass, gr.inertia
     muk = model.law.mu * model.law.k_s
+    dp, dw, ds = overlaps(y, model, motion.u0)
+    one = 1.0 / mass + radius**2 / inertia  # per granule: 1/m + R^2/I
     rate = 0.0
-    pairs = model.pairs
-    for c in range(pairs.i.shape[0]):
-        i = pairs.i[c]
-        j = pairs.j[c]
-        delta = pair_overlap(y, i, j, radius)[3]
-        if delta > 0.0:
-            inv = 1.0 / mass[i] + 1.0 / mass[j] + radius[i] ** 2 / inertia[i] + radius[j] ** 2 / inertia[j]
-            rate = max(rate, muk * pairs.A[c] * delta * math.sqrt(delta) * inv)
-    walls = model.walls
-    for c in range(walls.g.shape[0]):
-        i = walls.g[c]
-        delta = wall_overlap(y, i, walls.w[c], radius, walls)
-        if delta > 0.0:
-            rate = max(rate, muk * walls.A[c] * delta * math.sqrt(delta) * (1.0 / mass[i] + radius[i] ** 2 / inertia[i]))
-    points = model.points
-    for c in range(points.g.shape[0]):
-        i = points.g[c]
-        delta = point_overlap(y, i, c, radius, points, motion.u0[c, 0], motion.u0[c, 1])
-        if delta > 0.0:
-            rate = max(rate, muk * points.A[c] * delta * math.sqrt(delta) * (1.0 / mass[i] + radius[i] ** 2 / inertia[i]))
+    for c in range(dp.shape[0]):
+        if dp[c] > 0.0:
+            inv = one[model.pairs.i[c]] + one[model.pairs.j[c]]
+            rate = max(rate, muk * model.pairs.A[c] * dp[c] * math.sqrt(dp[c]) * inv)
+    for c in range(dw.shape[0]):
+        if dw[c] > 0.0:
+            rate = max(rate, muk * model.walls.A[c] * dw[c] * math.sqrt(dw[c]) * one[model.walls.g[c]])
+    for c in range(ds.shape[0]):
+        if ds[c] > 0.0:
+            rate = max(rate, muk * model.points.A[c] * ds[c] * math.sqrt(ds[c]) * one[model.points.g[c]])
     return rate
 
 
@@ -315,8 +325,7 @@ def granule_energies(y, model, su):
     (1/5 A delta^(5/2) per granule-granule contact, 2/5 per wall or solid contact); the solid
     contact points displaced by su (nc, 2)."""
     gr = model.granules
-    radius = gr.radius
-    n = radius.shape[0]
+    n = gr.radius.shape[0]
     V = 3 * n
     OM = 5 * n
     kin = np.empty(n)
@@ -325,25 +334,18 @@ def granule_energies(y, model, su):
     for i in range(n):
         kin[i] = 0.5 * gr.mass[i] * (y[V + 2 * i] ** 2 + y[V + 2 * i + 1] ** 2)
         rot[i] = 0.5 * gr.inertia[i] * y[OM + i] ** 2
-    pairs = model.pairs
-    for c in range(pairs.i.shape[0]):
-        i = pairs.i[c]
-        j = pairs.j[c]
-        delta = pair_overlap(y, i, j, radius)[3]
-        if delta > 0.0:
-            e = 0.5 * hertz_potential(pairs.A[c], delta)
-            pot[i] += e
-            pot[j] += e
-    walls = model.walls
-    for c in range(walls.g.shape[0]):
-        delta = wall_overlap(y, walls.g[c], walls.w[c], radius, walls)
-        if delta > 0.0:
-            pot[walls.g[c]] += hertz_potential(walls.A[c], delta)
-    points = model.points
-    for c in range(points.g.shape[0]):
-        delta = point_overlap(y, points.g[c], c, radius, points, su[c, 0], su[c, 1])
-        if delta > 0.0:
-            pot[points.g[c]] += hertz_potential(points.A[c], delta)
+    dp, dw, ds = overlaps(y, model, su)
+    for c in range(dp.shape[0]):
+        if dp[c] > 0.0:
+            e = 0.5 * hertz_potential(model.pairs.A[c], dp[c])
+            pot[model.pairs.i[c]] += e
+            pot[model.pairs.j[c]] += e
+    for c in range(dw.shape[0]):
+        if dw[c] > 0.0:
+            pot[model.walls.g[c]] += hertz_potential(model.walls.A[c], dw[c])
+    for c in range(ds.shape[0]):
+        if ds[c] > 0.0:
+            pot[model.points.g[c]] += hertz_potential(model.points.A[c], ds[c])
     return kin, rot, pot
 
 
