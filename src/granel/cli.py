@@ -85,6 +85,8 @@ def run(
     from .run import run_scenario, summarize
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
+    if dt:
+        ov.append("simulation.adaptive=false")  # --dt forces a fixed step
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
     sc = _load_or_fail(scenario, ov, _shock_level(shock))

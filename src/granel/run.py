@@ -33,7 +33,43 @@ def make_solver(problem: Problem, sparse: bool | None = None):
 
         return SparseSolver(problem.system, problem.state, solid, problem.settings, per)
     modes = all_modes(solid) if solid.ndof else None
-    return ModalSolver(problem.system, problem.state, solid, problem.settings, per, modes)
+    settings = problem.settings
+    if settings.method == "fast" and settings.integrator == "exact":
+        from .coupling.solver import ExactSolver
+
+        v_ref, e_ref = reference_scales(problem)
+        return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
+                           load_kinks(problem.system))
+    return ModalSolver(problem.system, problem.state, solid, settings, per, modes)
+
+
+def reference_scales(problem: Problem) -> tuple[float, float]:
+    """The velocity and energy scales of the adaptive step's error: the largest speed a load can
+    give its granule (peak impulse / mass) and the kinetic energy that carries (or the initial
+    motion's); 1 m/s and 1 J if neither is bounded."""
+    s = problem.system
+    speeds = [(e.history.peak_impulse() / s.mass[e.granule], s.mass[e.granule]) for e in s.excitations]
+    v = np.abs(problem.state.vel)
+    speeds += [(float(np.hypot(*problem.state.vel[g])), s.mass[g]) for g in np.flatnonzero(v.max(axis=1) > 0)] if v.size else []
+    finite = [(sp, m) for sp, m in speeds if np.isfinite(sp) and sp > 0]
+    if not finite:
+        return 1.0, 1.0
+    return max(sp for sp, _ in finite), max(0.5 * m * sp * sp for sp, m in finite)
+
+
+def load_kinks(system) -> list[float]:
+    """Times where a load's history is not smooth: a step never crosses them."""
+    out = []
+    for e in system.excitations:
+        h = e.history
+        p = h.params
+        if h.kind == "half_sine":
+            out += [p[2], p[2] + p[1]]
+        elif h.kind == "burst":
+            out += [p[2], p[2] + p[3] / p[1]]
+        elif h.kind == "table":
+            out += list(np.asarray(h.times, float))
+    return out
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None) -> xr.Dataset:

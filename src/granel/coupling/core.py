@@ -436,5 +436,5 @@ def iter_work(y, nc):
     """Scratch arrays of `interface_solve` for nc contacts and a state like y."""
     z2 = np.zeros((nc, 2))
     iface = InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
-    return IterWork(np.empty_like(y), np.empty((5, y.shape[0])), Motion(z2.copy(), z2.copy(), z2.copy()),
+    return IterWork(np.empty_like(y), np.empty((5, y.shape[0])), Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()),
                     z2.copy(), z2.copy(), np.zeros(2 * nc), z2.copy(), np.zeros((2 * nc, 2 * nc)), np.zeros(2 * nc), iface)

@@ -29,12 +29,19 @@ class SolverSettings:
     """The coupled solver's method and its numbers (the scenario's [simulation] table)."""
 
     method: str = "fast"  # fast | paper
-    dt: float = 4e-8  # dtau0
+    dt: float = 4e-8  # dtau0; the fixed step of a non-adaptive run
     halvings: int = 12  # the smallest step is dt / 2^halvings
     lambda_max: float = 0.5  # (B1)
     abstol: float = 1e-6  # (A4) [N]
     reltol: float = 1e-6
     max_iterations: int = 50
+    integrator: str = "newmark"  # the fast method's solid integrator: newmark | exact (modal, cubic force)
+    adaptive: bool = True  # the exact integrator's error-controlled steps (False: every step is dt)
+    rtol: float = 1e-5  # local error tolerance of the adaptive step, relative to v_ref
+    atol: float = 1e-9  # [m/s]
+    max_step: float = 1e-6  # [s]
+    mode_cutoff: float = 2e6  # [Hz]: modes above answer statically (residual flexibility)
+    ledger_tol: float = 2e-5  # the step's energy-ledger defects (13) add up to at most this share of the input
 
     def config(self, max_disp: float) -> core.CoupledConfig:
         paper = self.method == "paper"
@@ -172,3 +179,152 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
             "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
             "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
             "force_normal": np.einsum("ij,ij->i", F, normals), "force_tangential": np.einsum("ij,ij->i", F, tangents)}
+
+
+class ExactSolver:
+    """The fast method with the exact modal integrator (`coupling.exact`): retained modes below
+    `mode_cutoff` propagated in closed form under a cubic Hermite interface force, the dropped
+    modes' static compliance at the contacts, Newton on the end forces and slopes, and
+    error-controlled steps with dense output at the output times."""
+
+    def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
+                 schedule, modes=None, v_ref: float = 1.0, e_ref: float = 1.0, kinks=()):
+        from . import exact
+
+        self.system, self.model, self.settings, self.schedule = system, model, settings, schedule
+        self.y0 = state0.y.copy()
+        self.stepper = Stepper(system, substep=True)
+        nc = len(system.solid_contacts)
+        frame = contact_frame(system, model)
+        if model.ndof:
+            keep = modes.omega <= 2 * np.pi * settings.mode_cutoff
+            B = model.contact_map()
+            P = np.ascontiguousarray(B @ modes.shapes[:, keep])
+            omega = modes.omega[keep]
+            static = residual_compliance(model, B, P, omega)
+            # the dropped modes follow the force statically: eta_i = (P_i' F) / w_i^2
+            self.P_drop = np.ascontiguousarray(B @ modes.shapes[:, ~keep])
+            self.omega_drop = modes.omega[~keep]
+        else:
+            P, omega, static = np.zeros((2 * nc, 0)), np.zeros(0), np.zeros((2 * nc, 2 * nc))
+            self.P_drop, self.omega_drop = np.zeros((2 * nc, 0)), np.zeros(0)
+        self.modes, self.kept = modes, int(len(omega))
+        self.solid = exact.ExactSolid(omega, P, static, frame)
+        fixed = not settings.adaptive
+        levels = 0 if fixed else 4 * settings.halvings
+        h_max = settings.dt if fixed else settings.max_step
+        nr, m2 = len(omega), 2 * nc
+        L = levels + 2
+        self.cache = exact.OpsCache(np.zeros(L, bool), np.zeros((L, nr, 3)), np.zeros((L, nr, 4)), np.zeros((L, nr, 4)),
+                                    np.zeros((L, nr, 4)), np.zeros((L, 4, m2, m2)), np.zeros((L, 4, m2, m2)),
+                                    np.zeros((L, 4, m2, m2)))
+        self.cfg = exact.ExactConfig(float(h_max), int(levels), not fixed, float(settings.rtol), float(settings.atol),
+                                     float(v_ref), float(e_ref), float(settings.ledger_tol), float(schedule.duration), True, float(settings.abstol), float(settings.reltol),
+                                     int(settings.max_iterations), float(self.stepper.max_disp))
+        self.kinks = np.array(sorted(k for k in kinks if np.isfinite(k) and k > 0), float)
+        self.log = core.StepLog(np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY, np.int64),
+                                np.zeros((LOG_CAPACITY, nc)))
+        self.t_out = 0.0
+        self._exact = exact
+
+    @property
+    def name(self) -> str:
+        return "fast"
+
+    def start(self) -> None:
+        from ..granular.kernels import rhs
+
+        nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
+        y = self.y0.copy()
+        dy = np.zeros_like(y)
+        rhs(0.0, y, dy, self.stepper.model, self.stepper._still, 0.0)
+        z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
+        level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
+        from ..granular.bundles import Motion
+
+        self.st = self._exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(2 * nc), z(nc),
+                                         z(nc), y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr),
+                                         Motion(zc(), zc(), zc(), zc()), np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y)]),
+                                         np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
+        self.t_out = 0.0
+
+    def _ledger(self, y) -> float:
+        """E_granular + D - W of the initial state (the solid starts at rest)."""
+        g = GranularState(y, 0.0)
+        return float(sum(x.sum() for x in self.stepper.energies(g))) + g.dissipated_viscous + g.dissipated_friction - g.input_work
+
+    def save(self) -> dict:
+        out = {f"st:{k}": np.asarray(v) for k, v in self.st._asdict().items() if k != "step_motion"}
+        out.update({f"motion:{k}": v for k, v in self.st.step_motion._asdict().items()})
+        out["ref_pos"] = self.stepper.nl.ref_pos
+        out["t_out"] = self.t_out
+        return out
+
+    def load(self, arrays: dict) -> None:
+        from ..granular.bundles import Motion
+
+        motion = Motion(*[np.array(arrays[f"motion:{k}"]) for k in Motion._fields])
+        self.st = self._exact.ExactState(*[motion if k == "step_motion" else np.array(arrays[f"st:{k}"])
+                                           for k in self._exact.ExactState._fields])
+        self.stepper.refresh(arrays["ref_pos"])
+        self.t_out = float(arrays["t_out"])
+
+    @property
+    def t(self) -> float:
+        return self.t_out
+
+    def advance(self, k: int, trajectory) -> None:
+        """Steps until the clock passes output k; the state there comes by dense output."""
+        target = k * self.schedule.per * self.settings.dt
+        st = self.st
+        while st.clock[0] < target * (1 - 1e-12):
+            status, m = self._exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache,
+                                                  self.cfg, target, self.kinks, self.log)
+            if m:
+                trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
+            if status == core.REBUILD:
+                self.stepper.refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
+                self.stepper.rebuilds += 1
+            elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
+                what = "the granular state became non-finite" if status == core.NON_FINITE else \
+                    "Newton on the interface forces and slopes did not converge"
+                raise SolverError(f"t = {st.clock[0]:.6e} s: {what} even at the smallest step "
+                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s); lower k_s or raise simulation.max_halvings")
+        self.t_out = target
+
+    def _dense(self):
+        nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
+        y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
+        self._exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
+        return y, eta, etad, F
+
+    def observe(self) -> dict:
+        y, eta, etad, F = self._dense()
+        f = F.ravel()
+        su = (self.solid.P @ eta + self.solid.R @ f).reshape(-1, 2)
+        ek = 0.5 * float(etad @ etad)
+        ep = 0.5 * float(eta @ (self.solid.omega**2 * eta)) + 0.5 * float(f @ self.solid.R @ f)
+        return observation(self.stepper, GranularState(y, self.t_out), su, (ek, ep), F, self.solid.frame.tangent, self.system)
+
+    def solid_snapshot(self) -> dict:
+        """All modes: the retained ones' state, the dropped ones' static response to the force
+        (their inertia is neglected, so their velocity is stored as zero and the modal energies
+        add up to the solid's energy)."""
+        _, eta, etad, F = self._dense()
+        static = (F.ravel() @ self.P_drop) / self.omega_drop**2
+        return {"eta": np.concatenate([eta, static]).astype(np.float32),
+                "eta_dot": np.concatenate([etad, np.zeros_like(static)]).astype(np.float32)}
+
+    def attributes(self) -> dict:
+        s = self.settings
+        return {"name": "fast", "integrator": "exact", "adaptive": int(s.adaptive), "rtol": s.rtol, "atol": s.atol,
+                "max_step": s.max_step, "dt0": s.dt, "mode_cutoff_hz": s.mode_cutoff, "modes_kept": self.kept,
+                "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds, "solid_representation": "modal"}
+
+
+def residual_compliance(model: SolidModel, B, P, omega) -> np.ndarray:
+    """R = B K^-1 B' - P W^-2 P': the static compliance of the dropped modes at the contacts."""
+    from scipy.sparse.linalg import splu
+
+    full = B @ splu(model.K.tocsc()).solve(B.T.toarray())
+    return np.ascontiguousarray(full - (P / omega**2) @ P.T)

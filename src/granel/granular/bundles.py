@@ -92,17 +92,20 @@ class GranularModel(NamedTuple):
 
 
 class Motion(NamedTuple):
-    """The solid contact points' motion inside a step, u(tau) = u0 + v0 tau + a tau^2 / 2, (nc, 2)
-    each: the constant-average-acceleration interpolation (A3); zero for a rigid solid."""
+    """The solid contact points' motion inside a step, u(tau) = u0 + v0 tau + a tau^2/2 + j tau^3/6,
+    (nc, 2) each: the constant-average-acceleration interpolation (A3) has j = 0; the exact modal
+    integrator passes the cubic Hermite through the end displacements and velocities. Zero for a
+    rigid solid."""
 
     u0: np.ndarray
     v0: np.ndarray
     a: np.ndarray
+    j: np.ndarray
 
 
 def still(nc: int) -> Motion:
     z = np.zeros((nc, 2))
-    return Motion(z, z, z)
+    return Motion(z, z, z, z)
 
 
 class InterfaceForces(NamedTuple):

@@ -53,10 +53,15 @@ def point_overlap(y, i, c, radius, points, ux, uy):
 
 @njit(cache=True, inline="always")
 def motion_at(motion, c, tau):
-    """(ux, uy, wx, wy): displacement and velocity of contact point c at tau into the step (A3)."""
-    ux = motion.u0[c, 0] + motion.v0[c, 0] * tau + 0.5 * motion.a[c, 0] * tau * tau
-    uy = motion.u0[c, 1] + motion.v0[c, 1] * tau + 0.5 * motion.a[c, 1] * tau * tau
-    return ux, uy, motion.v0[c, 0] + motion.a[c, 0] * tau, motion.v0[c, 1] + motion.a[c, 1] * tau
+    """(ux, uy, wx, wy): displacement and velocity of contact point c at tau into the step (A3,
+    or the cubic of the exact modal integrator)."""
+    t2 = 0.5 * tau * tau
+    t3 = t2 * tau / 3.0
+    ux = motion.u0[c, 0] + motion.v0[c, 0] * tau + motion.a[c, 0] * t2 + motion.j[c, 0] * t3
+    uy = motion.u0[c, 1] + motion.v0[c, 1] * tau + motion.a[c, 1] * t2 + motion.j[c, 1] * t3
+    wx = motion.v0[c, 0] + motion.a[c, 0] * tau + motion.j[c, 0] * t2
+    wy = motion.v0[c, 1] + motion.a[c, 1] * tau + motion.j[c, 1] * t2
+    return ux, uy, wx, wy
 
 
 # ---------------------------------------------------------------- forces
@@ -349,6 +354,22 @@ def granule_energies(y, model, su):
     return kin, rot, pot
 
 
+@njit(cache=True, inline="always")
+def point_kinematics(y, model, c, ux, uy, wx, wy):
+    """Contact point c displaced by (ux, uy) and moving at (wx, wy): (granule i, overlap delta,
+    n, t = k x n, the granule's velocity relative to the point, v_t of eq. 6)."""
+    radius = model.granules.radius
+    n = radius.shape[0]
+    points = model.points
+    i = points.g[c]
+    nx, ny = points.n[c, 0], points.n[c, 1]
+    tx, ty = -ny, nx
+    delta = point_overlap(y, i, c, radius, points, ux, uy)
+    rvx = y[3 * n + 2 * i] - wx
+    rvy = y[3 * n + 2 * i + 1] - wy
+    return i, delta, nx, ny, tx, ty, rvx, rvy, rvx * tx + rvy * ty + radius[i] * y[5 * n + i]
+
+
 @njit(cache=True)
 def interface_forces(y, model, u, w, out, derivatives=True):
     """At the solid contact points displaced by u and moving at w (nc, 2): the forces on the solid
@@ -356,21 +377,10 @@ def interface_forces(y, model, u, w, out, derivatives=True):
     `derivatives`, the 2x2 derivatives of each force with respect to that point's displacement
     (out.Du) and velocity (out.Dw), from `contact_law_derivatives` (the granules' own sensitivity
     left out, the paper's Assumption 3)."""
-    gr = model.granules
-    radius = gr.radius
-    n = radius.shape[0]
-    V = 3 * n
-    OM = 5 * n
     points = model.points
     mu, k_s = model.law.mu, model.law.k_s
     for c in range(points.g.shape[0]):
-        i = points.g[c]
-        nx, ny = points.n[c, 0], points.n[c, 1]
-        tx, ty = -ny, nx
-        delta = point_overlap(y, i, c, radius, points, u[c, 0], u[c, 1])
-        rvx = y[V + 2 * i] - w[c, 0]
-        rvy = y[V + 2 * i + 1] - w[c, 1]
-        vt = rvx * tx + rvy * ty + radius[i] * y[OM + i]
+        i, delta, nx, ny, tx, ty, rvx, rvy, vt = point_kinematics(y, model, c, u[c, 0], u[c, 1], w[c, 0], w[c, 1])
         out.vrel[c] = vt
         out.F[c, 0] = 0.0
         out.F[c, 1] = 0.0

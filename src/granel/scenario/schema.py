@@ -41,13 +41,20 @@ class SimulationSpec(_Strict):
     max_halvings: int = Field(12, ge=0)
     checkpoint_every: float = 0.0
     solid_output_every: float = Field(0.0, description="interval of stored solid states (0: output_every)")
+    integrator: Literal["newmark", "exact"] = Field("newmark", description="the fast method's solid integrator")
+    adaptive: bool = Field(True, description="error-controlled steps (exact integrator); false: every step is dt")
+    rtol: float = Field(1e-5, gt=0, lt=1, description="local error tolerance, relative to the largest speed the loads impart")
+    atol: float = Field(1e-9, ge=0, description="absolute local error tolerance [m/s]")
+    max_step: float = Field(1e-6, description="largest adaptive step [s]")
+    mode_cutoff: float = Field(2e6, gt=0, description="modes above this frequency [Hz] answer statically (exact integrator)")
+    ledger_tol: float = Field(2e-5, gt=0, lt=1, description="exact integrator: the steps' energy-ledger defects (13) add up to at most this share of the input")
 
-    @field_validator("duration", "dt", "output_every", "checkpoint_every", "solid_output_every", mode="before")
+    @field_validator("duration", "dt", "output_every", "checkpoint_every", "solid_output_every", "max_step", mode="before")
     @classmethod
     def _parse(cls, v):
         return _time(v)
 
-    @field_validator("duration", "dt", "output_every")
+    @field_validator("duration", "dt", "output_every", "max_step")
     @classmethod
     def _positive(cls, v):
         if not v > 0 or not math.isfinite(v):

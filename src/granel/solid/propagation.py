@@ -64,31 +64,43 @@ def hermite_taylor(h, out):
 
 
 @njit(cache=True)
-def hermite_weights(omega, h, hom, wd, wv):
-    """Per mode i (omega[i]) over a step h: hom[i] = (S0, h S1, -w^2 h S1) for the free response,
-    and wd[i, b], wv[i, b]: the end displacement and velocity per unit modal force of Hermite
-    datum b (0: F0, 1: F0', 2: F1, 3: F1')."""
+def weights_at(omega, h, tau, hom, wd, wv, wa):
+    """Modal weights at tau in a step of size h (the Hermite basis lives on [0, h]): the free
+    response hom (S0, tau S1, -w^2 tau S1) at w tau and, per Hermite datum b, the displacement
+    wd, velocity wv and acceleration wa of the mode at tau per unit modal datum."""
     S = np.empty(6)
     T = np.empty((4, 4))
     hermite_taylor(h, T)
-    hp = np.empty(6)
-    hp[0] = 1.0
+    tp = np.empty(6)
+    tp[0] = 1.0
     for p in range(1, 6):
-        hp[p] = hp[p - 1] * h
+        tp[p] = tp[p - 1] * tau
+    basis_at = np.empty(4)  # H_b(tau)
+    for b in range(4):
+        basis_at[b] = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
     for i in range(omega.shape[0]):
         w = omega[i]
-        oscillator_functions(w * h, S)
+        oscillator_functions(w * tau, S)
         hom[i, 0] = S[0]
-        hom[i, 1] = h * S[1]
-        hom[i, 2] = -w * w * h * S[1]
+        hom[i, 1] = tau * S[1]
+        hom[i, 2] = -w * w * tau * S[1]
         for b in range(4):
             d = 0.0
             v = 0.0
             for k in range(4):
-                d += T[b, k] * hp[k + 2] * S[k + 2]
-                v += T[b, k] * hp[k + 1] * S[k + 1]
+                d += T[b, k] * tp[k + 2] * S[k + 2]
+                v += T[b, k] * tp[k + 1] * S[k + 1]
             wd[i, b] = d
             wv[i, b] = v
+            wa[i, b] = basis_at[b] - w * w * d  # eta'' = g - w^2 eta
+
+
+@njit(cache=True)
+def hermite_weights(omega, h, hom, wd, wv):
+    """Per mode i (omega[i]) over a step h: hom[i] = (S0, h S1, -w^2 h S1) for the free response,
+    and wd[i, b], wv[i, b]: the end displacement and velocity per unit modal force of Hermite
+    datum b (0: F0, 1: F0', 2: F1, 3: F1')."""
+    weights_at(omega, h, h, hom, wd, wv, np.empty_like(wd))
 
 
 def modal_step_cubic(omega, h, eta0, etad0, g):

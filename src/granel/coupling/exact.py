@@ -1,0 +1,661 @@
+"""The exact modal integrator of the shared core (the fast method's solid integrator): each retained
+mode is propagated in closed form under an interface force that is a cubic Hermite polynomial over
+the step (its values F and slopes F' at both ends), the dropped high modes answer statically
+(residual flexibility), and the step size is error-controlled.
+
+Over a step [t0, t0 + h] the contact points' displacement is
+    u(tau) = P eta(tau) + R F(tau),     eta_i'' + w_i^2 eta_i = (P' F(tau))_i,
+with P = B Phi over the retained modes (w_i <= w_cut) and R = B K^-1 B' - P W^-2 P' the static
+compliance of the dropped modes at the contacts. `solid.propagation` gives eta and eta' at the
+step's end per unit of each Hermite datum (F0, F0', F1, F1'); so the end displacement u1, velocity
+w1 and acceleration a1 of the contacts are affine in the unknowns X = (F1, F1'):
+    u1 = u1_free + sum_b Cu[b] X_b,   w1 = ...,   a1 = ...       (b over the four data)
+The granules are integrated by RK4 under the cubic Hermite motion through (u0, w0, u1, w1); the map
+X -> G(X) returns the forces at the step's end (eqs. 2, 5) and their time derivative from the
+contact law (`kernels.interface_force_rates`). Newton on X = G(X) uses the contact law's
+derivatives (the granules' sensitivity neglected, the paper's Assumption 3).
+
+Local error estimate of the whole coupled step, checked against rtol and atol:
+  granules: the embedded third-order solution of classical RK4 with the end-of-step derivative
+            (FSAL weights (1, 2, 2, 0, 1)/6): err = h/6 (k4 - k5), per RK4 sub-step;
+  solid:    the end velocity of the contacts under the cubic force against that under the
+            quadratic through (F0, F0', F1) only: the response to kappa tau^2 (tau - h).
+Both estimate the error of a third-order companion (local extrapolation): the accepted step is the
+fourth-order one. A PI controller picks the next step on a geometric grid h_k = h_max 2^(-k/4)
+(so the per-step operators are cached), and a step never crosses a load's kink.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..granular.bundles import InterfaceForces, Motion
+from ..granular.contact import contact_law_derivatives
+from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, point_kinematics, rhs, rk4_step
+from ..solid.propagation import hermite_taylor, weights_at
+from . import core
+
+GRID_PER_OCTAVE = 4
+
+
+class ExactSolid(NamedTuple):
+    """Retained modes (omega, P = B Phi: (2nc, nr)), the residual compliance R (2nc, 2nc) of the
+    dropped ones, and the contacts' frame."""
+
+    omega: np.ndarray
+    P: np.ndarray
+    R: np.ndarray
+    frame: core.ContactFrame
+
+
+class Ops(NamedTuple):
+    """Per step size h: modal weights hom (nr, 3) = (S0, h S1, -w^2 h S1), wd/wv/wa (nr, 4) the
+    end displacement, velocity and acceleration per unit modal Hermite datum, and the contact
+    operators Cu/Cw/Ca (4, 2nc, 2nc) (the residual compliance included)."""
+
+    hom: np.ndarray
+    wd: np.ndarray
+    wv: np.ndarray
+    wa: np.ndarray
+    Cu: np.ndarray
+    Cw: np.ndarray
+    Ca: np.ndarray
+
+
+class OpsCache(NamedTuple):
+    """Ops of the grid levels h_k = h_max 2^(-k/4), computed on first use (index k), and one
+    slot (the last) for an off-grid step (a step cut at a load's kink)."""
+
+    ready: np.ndarray  # (L+1,) bool
+    hom: np.ndarray  # (L+1, nr, 3)
+    wd: np.ndarray  # (L+1, nr, 4)
+    wv: np.ndarray
+    wa: np.ndarray
+    Cu: np.ndarray  # (L+1, 4, 2nc, 2nc)
+    Cw: np.ndarray
+    Ca: np.ndarray
+
+
+class ExactConfig(NamedTuple):
+    h_max: float
+    levels: int  # L: the smallest grid step is h_max 2^(-L/4)
+    adaptive: bool  # False: every step is h_max (a fixed step)
+    rtol: float
+    atol: float  # [m/s]
+    v_ref: float  # velocity scale of the error norm [m/s]
+    e_ref: float  # energy scale of the error norm [J]
+    ledger_tol: float  # the energy ledger (13) may drift by ledger_tol e_ref over `duration`
+    duration: float
+    newton: bool
+    abstol: float
+    reltol: float
+    max_iterations: int
+    max_disp: float
+
+
+class ExactState(NamedTuple):
+    """The state at the current time (y, modal eta/eta', the interface force F and slope Fd and
+    their modal projections qF = P'F, qFd = P'Fd, the contacts' displacement u, velocity w and
+    acceleration a, |N|, v_t, the granules' derivative dy) and, for dense output, the same at
+    the previous step's start (suffix 0). clock = [t, t0, err_prev, friction rate of the last
+    step, energy ledger (13)]; meta = [level, rejected]."""
+
+    y: np.ndarray
+    dy: np.ndarray
+    eta: np.ndarray
+    etad: np.ndarray
+    F: np.ndarray
+    Fd: np.ndarray
+    qF: np.ndarray
+    qFd: np.ndarray
+    u: np.ndarray
+    w: np.ndarray
+    a: np.ndarray
+    normal: np.ndarray
+    vrel: np.ndarray
+    y0: np.ndarray
+    dy0: np.ndarray
+    eta0: np.ndarray
+    etad0: np.ndarray
+    F0: np.ndarray
+    Fd0: np.ndarray
+    qF0: np.ndarray
+    qFd0: np.ndarray
+    step_motion: Motion  # the contacts' motion in the last step (for dense output)
+    clock: np.ndarray
+    meta: np.ndarray
+
+
+class Work(NamedTuple):
+    ytr: np.ndarray
+    rk4: np.ndarray  # (5, len(y))
+    k5: np.ndarray
+    err: np.ndarray  # embedded error of the granular state
+    motion: Motion
+    u1: np.ndarray  # (2nc,)
+    w1: np.ndarray
+    a1: np.ndarray
+    uf: np.ndarray  # free parts (2nc,)
+    wf: np.ndarray
+    af: np.ndarray
+    X: np.ndarray  # (4nc,) unknowns (F1, Fd1) flat
+    X_start: np.ndarray
+    G: np.ndarray  # (4nc,)
+    J: np.ndarray  # (4nc, 4nc)
+    r: np.ndarray
+    iface: InterfaceForces
+    Fdot: np.ndarray  # (nc, 2)
+    ww: np.ndarray  # (nr,) modal scratch
+    rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
+    K: np.ndarray  # (nc, 2, 2): d(force rate)/d(force) through the granule's own acceleration
+    parts: np.ndarray  # (2,): the last step's scaled velocity error and energy-ledger defect
+    qF1: np.ndarray  # (nr,): P' F1 and P' F1' of the trial step
+    qFd1: np.ndarray
+
+
+@njit(cache=True)
+def work_for(y, nc, nr):
+    z2 = np.zeros((nc, 2))
+    m2 = 2 * nc
+    iface = InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
+    return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y),
+                Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()), np.zeros(m2), np.zeros(m2), np.zeros(m2),
+                np.zeros(m2), np.zeros(m2), np.zeros(m2), np.zeros(2 * m2), np.zeros(2 * m2), np.zeros(2 * m2),
+                np.zeros((2 * m2, 2 * m2)), np.zeros(2 * m2), iface, np.zeros((nc, 2)), np.zeros(nr), np.zeros(1),
+                np.zeros((nc, 2, 2)), np.zeros(2), np.zeros(nr), np.zeros(nr))
+
+
+# ---------------------------------------------------------------- per-step operators
+
+
+@njit(cache=True)
+def _contact_operator(P, weight, out):
+    """out = P diag(weight) P'."""
+    m2 = P.shape[0]
+    for a in range(m2):
+        for b in range(a, m2):
+            acc = 0.0
+            for i in range(P.shape[1]):
+                acc += P[a, i] * weight[i] * P[b, i]
+            out[a, b] = acc
+            out[b, a] = acc
+
+
+@njit(cache=True)
+def ensure_ops(cache, solid, slot, h):
+    """Fill `cache` slot `slot` for step size h (once per grid level; always for the off-grid slot)."""
+    if cache.ready[slot]:
+        return
+    omega, P, R = solid.omega, solid.P, solid.R
+    nr = omega.shape[0]
+    m2 = P.shape[0]
+    weights_at(omega, h, h, cache.hom[slot], cache.wd[slot], cache.wv[slot], cache.wa[slot])
+    col = np.empty(nr)
+    for b in range(4):
+        for i in range(nr):
+            col[i] = cache.wd[slot, i, b]
+        _contact_operator(P, col, cache.Cu[slot, b])
+        for i in range(nr):
+            col[i] = cache.wv[slot, i, b]
+        _contact_operator(P, col, cache.Cw[slot, b])
+        for i in range(nr):
+            col[i] = cache.wa[slot, i, b]
+        _contact_operator(P, col, cache.Ca[slot, b])
+    # residual (static) part u = R F(tau): F(h) = F1, F'(h) = F1', F''(h) from the Hermite basis
+    T = np.empty((4, 4))
+    hermite_taylor(h, T)
+    for b in range(4):
+        f2 = T[b, 2] + T[b, 3] * h  # second derivative of H_b at h
+        for r in range(m2):
+            for q in range(m2):
+                if b == 2:
+                    cache.Cu[slot, b, r, q] += R[r, q]
+                if b == 3:
+                    cache.Cw[slot, b, r, q] += R[r, q]
+                cache.Ca[slot, b, r, q] += f2 * R[r, q]
+    cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
+
+
+# ---------------------------------------------------------------- the interface map with slopes
+
+
+@njit(cache=True)
+def interface_force_rates(y, dy, model, u, w, a, out_Fd, K):
+    """d/dt of the forces on the solid at its contact points, from the contact law's derivatives
+    (eqs. 2, 5) and the rates of overlap, overlap rate and tangential velocity: the granule's
+    velocity and acceleration (y, dy) against the points' displacement u, velocity w and
+    acceleration a (flat 2nc). K[c] = d(force rate)/d(force on the solid) through the granule's
+    own acceleration (-F/m, spin -R (F.t)/I): stiff where friction is."""
+    gr = model.granules
+    radius = gr.radius
+    n = radius.shape[0]
+    V = 3 * n
+    OM = 5 * n
+    points = model.points
+    mu, k_s = model.law.mu, model.law.k_s
+    for c in range(points.g.shape[0]):
+        out_Fd[c, 0] = 0.0
+        out_Fd[c, 1] = 0.0
+        i, delta, nx, ny, tx, ty, rvx, rvy, vt = point_kinematics(y, model, c, u[2 * c], u[2 * c + 1], w[2 * c], w[2 * c + 1])
+        if delta <= 0.0:
+            continue
+        rax = dy[V + 2 * i] - a[2 * c]
+        ray = dy[V + 2 * i + 1] - a[2 * c + 1]
+        dd = rvx * nx + rvy * ny  # overlap rate
+        ddd = rax * nx + ray * ny  # its rate
+        dvt = rax * tx + ray * ty + radius[i] * dy[OM + i]
+        dfn_d, dfn_dd, dft_d, dft_dd, dft_dv = contact_law_derivatives(points.A[c], points.G[c], delta, dd, vt, mu, k_s)
+        fn_dot = dfn_d * dd + dfn_dd * ddd
+        ft_dot = dft_d * dd + dft_dd * ddd + dft_dv * dvt
+        out_Fd[c, 0] = fn_dot * nx - ft_dot * tx
+        out_Fd[c, 1] = fn_dot * ny - ft_dot * ty
+        inv_m = 1.0 / gr.mass[i]
+        spin = radius[i] * radius[i] / gr.inertia[i]
+        for b in range(2):
+            nb = nx if b == 0 else ny
+            tb = tx if b == 0 else ty
+            dfn = -dfn_dd * inv_m * nb  # d(fn rate) / dF_b
+            dft = -dft_dd * inv_m * nb - dft_dv * (inv_m + spin) * tb
+            K[c, 0, b] = nx * dfn - tx * dft
+            K[c, 1, b] = ny * dfn - ty * dft
+
+
+@njit(cache=True)
+def _motion_and_ends(st, cache, slot, h, w):
+    """The contacts' end displacement, velocity and acceleration for the unknowns in w.X, and the
+    cubic Hermite motion through (u0, w0, u1, w1) for the RK4 of the granules."""
+    m2 = st.u.shape[0]
+    X = w.X
+    for r in range(m2):
+        u1 = w.uf[r]
+        w1 = w.wf[r]
+        a1 = w.af[r]
+        for q in range(m2):
+            F0q = st.F[q // 2, q % 2]
+            Fd0q = st.Fd[q // 2, q % 2]
+            u1 += cache.Cu[slot, 0, r, q] * F0q + cache.Cu[slot, 1, r, q] * Fd0q + cache.Cu[slot, 2, r, q] * X[q] \
+                + cache.Cu[slot, 3, r, q] * X[m2 + q]
+            w1 += cache.Cw[slot, 0, r, q] * F0q + cache.Cw[slot, 1, r, q] * Fd0q + cache.Cw[slot, 2, r, q] * X[q] \
+                + cache.Cw[slot, 3, r, q] * X[m2 + q]
+            a1 += cache.Ca[slot, 0, r, q] * F0q + cache.Ca[slot, 1, r, q] * Fd0q + cache.Ca[slot, 2, r, q] * X[q] \
+                + cache.Ca[slot, 3, r, q] * X[m2 + q]
+        w.u1[r] = u1
+        w.w1[r] = w1
+        w.a1[r] = a1
+        c = r // 2
+        d = r % 2
+        u0, v0 = st.u[r], st.w[r]
+        c2 = (3.0 * (u1 - u0) / h - 2.0 * v0 - w1) / h
+        c3 = (2.0 * (u0 - u1) / h + v0 + w1) / (h * h)
+        w.motion.u0[c, d] = u0
+        w.motion.v0[c, d] = v0
+        w.motion.a[c, d] = 2.0 * c2
+        w.motion.j[c, d] = 6.0 * c3
+
+
+@njit(cache=True)
+def _rk4_with_estimate(y, t, h, model, motion, rate, w):
+    """RK4 (sub-stepped where friction is stiff) from y into w.ytr, the end derivative in w.k5
+    and the embedded third-order error h/6 (k4 - k5) summed over sub-steps in w.err. False if the
+    state stops being finite."""
+    m = max(1, int(math.ceil(rate * h / 2.0)))
+    s = h / m
+    w.ytr[:] = y
+    w.err[:] = 0.0
+    n = w.ytr.shape[0]
+    for k in range(m):
+        if not rk4_step(w.ytr, t + k * s, s, model, motion, k * s, w.rk4):
+            return False
+        rhs(t + (k + 1) * s, w.ytr, w.k5, model, motion, (k + 1) * s)
+        k4 = w.rk4[3]
+        for q in range(n):
+            w.err[q] += s / 6.0 * (k4[q] - w.k5[q])
+    return True
+
+
+@njit(cache=True)
+def hermite_map(st, t, h, model, cache, slot, rate, w, derivatives):
+    """X = (F1, F1') -> G(X): the end forces and their slopes after RK4 of the granules under the
+    contacts' motion that X implies. Fills w.G, w.iface (with the law's derivatives if asked),
+    w.ytr, w.k5, w.err. False if the granular state stopped being finite."""
+    _motion_and_ends(st, cache, slot, h, w)
+    if not _rk4_with_estimate(st.y, t, h, model, w.motion, rate, w):
+        return False
+    nc = st.F.shape[0]
+    m2 = 2 * nc
+    u1 = w.u1.reshape(nc, 2)
+    w1 = w.w1.reshape(nc, 2)
+    interface_forces(w.ytr, model, u1, w1, w.iface, derivatives)
+    interface_force_rates(w.ytr, w.k5, model, w.u1, w.w1, w.a1, w.Fdot, w.K)
+    for r in range(m2):
+        w.G[r] = w.iface.F[r // 2, r % 2]
+        w.G[m2 + r] = w.Fdot[r // 2, r % 2]
+    return True
+
+
+@njit(cache=True)
+def _newton_step(w, cache, slot, h, frame, law):
+    """X <- X + dX, (I - J) dX = G - X with J = [[Du Cu + Dw Cw], [Du Cw + Dw Ca]] over the unknown
+    data (F1, F1'); then the exact local friction root where the friction map is not contractive."""
+    m2 = w.u1.shape[0]
+    nc = m2 // 2
+    Du, Dw = w.iface.Du, w.iface.Dw
+    J = w.J
+    for r in range(m2):
+        c = r // 2
+        d = r % 2
+        for qb in range(2):  # unknown block: F1 (b = 2) or F1' (b = 3)
+            b = 2 + qb
+            for q in range(m2):
+                ju = Du[c, d, 0] * cache.Cu[slot, b, 2 * c, q] + Du[c, d, 1] * cache.Cu[slot, b, 2 * c + 1, q]
+                jw = Dw[c, d, 0] * cache.Cw[slot, b, 2 * c, q] + Dw[c, d, 1] * cache.Cw[slot, b, 2 * c + 1, q]
+                J[r, qb * m2 + q] = -(ju + jw)
+                ju2 = Du[c, d, 0] * cache.Cw[slot, b, 2 * c, q] + Du[c, d, 1] * cache.Cw[slot, b, 2 * c + 1, q]
+                jw2 = Dw[c, d, 0] * cache.Ca[slot, b, 2 * c, q] + Dw[c, d, 1] * cache.Ca[slot, b, 2 * c + 1, q]
+                J[m2 + r, qb * m2 + q] = -(ju2 + jw2)
+    # the force rate also moves with the end force itself (the granule's own acceleration): + K J_F
+    for c in range(nc):
+        for d in range(2):
+            for q in range(2 * m2):
+                J[m2 + 2 * c + d, q] += w.K[c, d, 0] * J[2 * c, q] + w.K[c, d, 1] * J[2 * c + 1, q]
+    for r in range(2 * m2):
+        J[r, r] += 1.0
+        w.r[r] = w.G[r] - w.X[r]
+    dX = np.linalg.solve(J, w.r)
+    for c in range(nc):
+        tx, ty = frame.tangent[c, 0], frame.tangent[c, 1]
+        sj = w.X[2 * c] * tx + w.X[2 * c + 1] * ty
+        w.X[2 * c] += dX[2 * c]
+        w.X[2 * c + 1] += dX[2 * c + 1]
+        w.X[m2 + 2 * c] += dX[m2 + 2 * c]
+        w.X[m2 + 2 * c + 1] += dX[m2 + 2 * c + 1]
+        if w.iface.normal[c] <= 0.0 or not frame.has_tangent[c]:
+            continue
+        ctt = tx * (cache.Cw[slot, 2, 2 * c, 2 * c] * tx + cache.Cw[slot, 2, 2 * c, 2 * c + 1] * ty) \
+            + ty * (cache.Cw[slot, 2, 2 * c + 1, 2 * c] * tx + cache.Cw[slot, 2, 2 * c + 1, 2 * c + 1] * ty)
+        muN = law.mu * w.iface.normal[c]
+        if muN * law.k_s * ctt <= 1.0:
+            continue
+        root = core.local_friction_root(muN, law.k_s, w.iface.vrel[c], ctt, sj)
+        s_now = w.X[2 * c] * tx + w.X[2 * c + 1] * ty
+        w.X[2 * c] += (root - s_now) * tx
+        w.X[2 * c + 1] += (root - s_now) * ty
+
+
+@njit(cache=True)
+def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
+    """Iterate X = G(X) for one step of size h (Newton, or the fixed point). Returns (status,
+    iterations); on success w holds the end state."""
+    nc = st.F.shape[0]
+    m2 = 2 * nc
+    # guess: the end values continue the start with its slope
+    for r in range(m2):
+        w.X[r] = st.F[r // 2, r % 2] + h * st.Fd[r // 2, r % 2]
+        w.X[m2 + r] = st.Fd[r // 2, r % 2]
+    w.X_start[:] = w.X
+    mo = w.motion
+    for c in range(nc):
+        mo.u0[c, 0] = st.u[2 * c]
+        mo.u0[c, 1] = st.u[2 * c + 1]
+    rate = 1.5 * friction_rate(st.y, model, mo)
+    w.rate[0] = rate
+    for it in range(1, cfg.max_iterations + 1):
+        if not hermite_map(st, t, h, model, cache, slot, rate, w, cfg.newton):
+            return core.NON_FINITE, it
+        if frame.fixed:
+            w.X[:] = w.G
+            return core.CONVERGED, it
+        ok = True
+        for r in range(m2):
+            F = w.X[r]
+            tol = cfg.abstol + cfg.reltol * abs(F)
+            if abs(w.G[r] - F) > tol or h * abs(w.G[m2 + r] - w.X[m2 + r]) > tol + cfg.reltol * h * abs(w.X[m2 + r]):
+                ok = False
+        if ok or not cfg.newton:
+            w.X[:] = w.G
+            if ok:
+                return core.CONVERGED, it
+            continue
+        _newton_step(w, cache, slot, h, frame, model.law)
+    return core.NO_CONVERGENCE, cfg.max_iterations
+
+
+# ---------------------------------------------------------------- error, accept, step loop
+
+
+@njit(cache=True)
+def trial_ledger(st, solid, cache, slot, model, w):
+    """E_solid + E_granular + D - W (eq. 13) at the end of the trial step: the modes' energy from
+    their exact end state (P' F1, P' F1' kept in w for the accept), the dropped modes' static
+    energy 1/2 F1' R F1, the granules' energy (11) and the ledger's accumulators."""
+    from_ = w.X
+    m2 = st.u.shape[0]
+    nr = st.eta.shape[0]
+    f1 = from_[:m2].copy()
+    if nr > 0:
+        w.qF1[:] = np.dot(f1, solid.P)
+        w.qFd1[:] = np.dot(from_[m2:].copy(), solid.P)
+    hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
+    es = 0.0
+    for i in range(nr):
+        e = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i] + wd[i, 0] * st.qF[i] + wd[i, 1] * st.qFd[i] + wd[i, 2] * w.qF1[i] + wd[i, 3] * w.qFd1[i]
+        v = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i] + wv[i, 0] * st.qF[i] + wv[i, 1] * st.qFd[i] + wv[i, 2] * w.qF1[i] + wv[i, 3] * w.qFd1[i]
+        es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
+    for r in range(m2):
+        for q in range(m2):
+            es += 0.5 * f1[r] * solid.R[r, q] * f1[q]
+    nc = m2 // 2
+    kin, rot, pot = granule_energies(w.ytr, model, w.u1.reshape(nc, 2))
+    n = kin.shape[0]
+    return es + kin.sum() + rot.sum() + pot.sum() + w.ytr[6 * n] + w.ytr[6 * n + 1] - w.ytr[6 * n + 2]
+
+
+@njit(cache=True)
+def step_error(y, w, cfg, granules, h, defect):
+    """The scaled local error of the coupled step (<= 1: accept): the largest embedded RK4 error
+    of a granule's velocity or spin velocity R omega against atol + rtol v_ref, and the step's
+    energy-ledger defect (13) against its share h / duration of ledger_tol e_ref."""
+    radius = granules.radius
+    n = radius.shape[0]
+    V = 3 * n
+    OM = 5 * n
+    ev = 0.0
+    for i in range(n):
+        ev = max(ev, abs(w.err[V + 2 * i]), abs(w.err[V + 2 * i + 1]), radius[i] * abs(w.err[OM + i]))
+    w.parts[0] = ev / (cfg.atol + cfg.rtol * cfg.v_ref)
+    w.parts[1] = abs(defect) / (cfg.ledger_tol * cfg.e_ref * h / cfg.duration)
+    return max(w.parts[0], w.parts[1])
+
+
+@njit(cache=True)
+def accept(st, solid, cache, slot, h, w, rate, ledger):
+    """The accepted step: modes, interface data and the granules to t + h; the start kept for
+    dense output."""
+    nc = st.F.shape[0]
+    m2 = 2 * nc
+    nr = st.eta.shape[0]
+    st.y0[:] = st.y
+    st.dy0[:] = st.dy
+    st.eta0[:] = st.eta
+    st.etad0[:] = st.etad
+    st.F0[:, :] = st.F
+    st.Fd0[:, :] = st.Fd
+    st.qF0[:] = st.qF
+    st.qFd0[:] = st.qFd
+    f1 = w.X[:m2].copy()
+    fd1 = w.X[m2:].copy()
+    qF1, qFd1 = w.qF1, w.qFd1  # from `trial_ledger`
+    hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
+    for i in range(nr):
+        e0 = st.eta[i]
+        v0 = st.etad[i]
+        st.eta[i] = hom[i, 0] * e0 + hom[i, 1] * v0 + wd[i, 0] * st.qF[i] + wd[i, 1] * st.qFd[i] + wd[i, 2] * qF1[i] + wd[i, 3] * qFd1[i]
+        st.etad[i] = hom[i, 2] * e0 + hom[i, 0] * v0 + wv[i, 0] * st.qF[i] + wv[i, 1] * st.qFd[i] + wv[i, 2] * qF1[i] + wv[i, 3] * qFd1[i]
+        st.qF[i] = qF1[i]
+        st.qFd[i] = qFd1[i]
+    for r in range(m2):
+        st.F[r // 2, r % 2] = f1[r]
+        st.Fd[r // 2, r % 2] = fd1[r]
+        st.u[r] = w.u1[r]
+        st.w[r] = w.w1[r]
+        st.a[r] = w.a1[r]
+    mo, sm = w.motion, st.step_motion
+    sm.u0[:, :] = mo.u0
+    sm.v0[:, :] = mo.v0
+    sm.a[:, :] = mo.a
+    sm.j[:, :] = mo.j
+    st.y[:] = w.ytr
+    st.dy[:] = w.k5
+    st.normal[:] = w.iface.normal
+    st.vrel[:] = w.iface.vrel
+    st.clock[1] = st.clock[0]
+    st.clock[0] += h
+    st.clock[3] = rate
+    st.clock[4] = ledger
+
+
+@njit(cache=True)
+def friction_slopes(st, law, cache, slot, frame, lam):
+    """The slope of each contact's local friction map over the step just taken, the analogue of
+    (A9) for this integrator: mu k_s |N| t' Cw t / cosh^2(k_s v_t), Cw the tangential velocity
+    response to the end force."""
+    for c in range(lam.shape[0]):
+        if not frame.has_tangent[c]:
+            lam[c] = 0.0
+            continue
+        tx, ty = frame.tangent[c, 0], frame.tangent[c, 1]
+        ctt = tx * (cache.Cw[slot, 2, 2 * c, 2 * c] * tx + cache.Cw[slot, 2, 2 * c, 2 * c + 1] * ty) \
+            + ty * (cache.Cw[slot, 2, 2 * c + 1, 2 * c] * tx + cache.Cw[slot, 2, 2 * c + 1, 2 * c + 1] * ty)
+        th = math.tanh(law.k_s * st.vrel[c])
+        lam[c] = law.mu * law.k_s * st.normal[c] * ctt * (1.0 - th * th)
+
+
+@njit(cache=True)
+def free_response(st, solid, cache, slot, w):
+    """The contacts' end displacement, velocity and acceleration with no interface force data
+    (w.uf, w.wf, w.af): P applied to the free modal response."""
+    nr = st.eta.shape[0]
+    if nr == 0:
+        w.uf[:] = 0.0
+        w.wf[:] = 0.0
+        w.af[:] = 0.0
+        return
+    hom = cache.hom[slot]
+    ww = w.ww
+    for i in range(nr):
+        ww[i] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
+    w.uf[:] = np.dot(solid.P, ww)
+    for i in range(nr):
+        ww[i] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
+    w.wf[:] = np.dot(solid.P, ww)
+    for i in range(nr):
+        ww[i] = -solid.omega[i] ** 2 * (hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i])
+    w.af[:] = np.dot(solid.P, ww)
+
+
+@njit(cache=True)
+def next_level(level, err, err_prev, cfg):
+    """PI control (exponents 0.7/4 and 0.4/4 for the third-order estimate) with a 0.9 safety
+    factor and growth between 1/5 and 2, rounded down to the grid h_max 2^(-k/4)."""
+    if not cfg.adaptive:
+        return 0
+    e = max(err, 1e-10)
+    fac = 0.9 * e ** (-0.7 / 4.0) * max(err_prev, 1e-4) ** (0.4 / 4.0)
+    fac = min(2.0, max(0.2, fac))
+    k = level - int(math.floor(GRID_PER_OCTAVE * math.log2(fac)))
+    return min(cfg.levels, max(0, k))
+
+
+@njit(cache=True)
+def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
+    """Accepted steps until the clock passes t_target (dense output covers the output itself).
+    Returns (status, steps logged): core.DONE, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE
+    or core.NON_FINITE."""
+    nc = st.F.shape[0]
+    n = model.granules.radius.shape[0]
+    w = work_for(st.y, nc, st.eta.shape[0])
+    lim2 = cfg.max_disp * cfg.max_disp
+    lam = np.zeros(nc)
+    off = cache.ready.shape[0] - 1
+    k = 0
+    while st.clock[0] < t_target:
+        if k >= log.t.shape[0]:
+            return core.LOG_FULL, k
+        level = st.meta[0]
+        h = cfg.h_max / 2.0 ** (level / GRID_PER_OCTAVE)
+        slot = level
+        t = st.clock[0]
+        for q in range(kinks.shape[0]):  # never step across a load's kink (nor stop just short of it)
+            if t + 1e-6 * h < kinks[q] < t + h:
+                h = kinks[q] - t
+                slot = off
+        ensure_ops(cache, solid, slot, h)
+        free_response(st, solid, cache, slot, w)
+        status, its = hermite_solve(st, t, h, model, cache, slot, cfg, solid.frame, w)
+        if status != core.CONVERGED:
+            if level + 2 * GRID_PER_OCTAVE <= cfg.levels and cfg.adaptive:
+                st.meta[0] = level + 2 * GRID_PER_OCTAVE  # a quarter of the step
+                st.meta[1] += 1
+                continue
+            return status, k
+        ledger = trial_ledger(st, solid, cache, slot, model, w)
+        err = step_error(w.ytr, w, cfg, model.granules, h, ledger - st.clock[4]) if cfg.adaptive else 0.0
+        if err > 1.0 and level < cfg.levels:
+            st.meta[0] = max(level + 1, next_level(level, err, 1.0, cfg))
+            st.meta[1] += 1
+            continue
+        accept(st, solid, cache, slot, h, w, w.rate[0], ledger)
+        friction_slopes(st, model.law, cache, slot, solid.frame, lam)
+        log.t[k] = st.clock[0]
+        log.h[k] = h
+        log.iterations[k] = its
+        log.lam[k, :] = lam
+        k += 1
+        st.meta[0] = next_level(level, err, st.clock[2], cfg)
+        st.clock[2] = max(err, 1e-4)
+        if moved_beyond(st.y, n, ref_pos, lim2):
+            return core.REBUILD, k
+    return core.DONE, k
+
+
+@njit(cache=True)
+def dense_state(st, solid, model, t_out, yo, eta_o, etad_o, F_o):
+    """The state at t_out inside the last accepted step [t0, t]: the granules by RK4 from the
+    step's start over tau = t_out - t0 under the step's own contact motion (full RK4 accuracy,
+    the step itself unchanged), the modes by their exact response to the step's cubic force, and
+    the interface force by its Hermite cubic."""
+    t0, t1 = st.clock[1], st.clock[0]
+    h = t1 - t0
+    tau = t_out - t0
+    if h <= 0.0 or tau >= h:
+        yo[:] = st.y
+        eta_o[:] = st.eta
+        etad_o[:] = st.etad
+        F_o[:, :] = st.F
+        return
+    yo[:] = st.y0
+    if tau > 0.0:
+        m = max(1, int(math.ceil(st.clock[3] * tau / 2.0)))
+        s_ = tau / m
+        work = np.empty((5, yo.shape[0]))
+        for k in range(m):
+            rk4_step(yo, t0 + k * s_, s_, model, st.step_motion, k * s_, work)
+    s = tau / h
+    h00 = (1 + 2 * s) * (1 - s) ** 2
+    h10 = s * (1 - s) ** 2 * h
+    h01 = s * s * (3 - 2 * s)
+    h11 = s * s * (s - 1) * h
+    for c in range(st.F.shape[0]):
+        for d in range(2):
+            F_o[c, d] = h00 * st.F0[c, d] + h10 * st.Fd0[c, d] + h01 * st.F[c, d] + h11 * st.Fd[c, d]
+    nr = st.eta.shape[0]
+    hom, wd, wv, wa = np.empty((nr, 3)), np.empty((nr, 4)), np.empty((nr, 4)), np.empty((nr, 4))
+    weights_at(solid.omega, h, tau, hom, wd, wv, wa)
+    for i in range(nr):
+        e0, v0 = st.eta0[i], st.etad0[i]
+        eta_o[i] = hom[i, 0] * e0 + hom[i, 1] * v0 + wd[i, 0] * st.qF0[i] + wd[i, 1] * st.qFd0[i] + wd[i, 2] * st.qF[i] + wd[i, 3] * st.qFd[i]
+        etad_o[i] = hom[i, 2] * e0 + hom[i, 0] * v0 + wv[i, 0] * st.qF0[i] + wv[i, 1] * st.qFd0[i] + wv[i, 2] * st.qF[i] + wv[i, 3] * st.qFd[i]
