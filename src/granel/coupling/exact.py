@@ -1,28 +1,27 @@
 """The exact modal integrator of the shared core (the fast method's solid integrator): each retained
-mode is propagated in closed form under an interface force that is a cubic Hermite polynomial over
-the step (its values F and slopes F' at both ends), the dropped high modes answer statically
-(residual flexibility), and the step size is error-controlled.
+mode is propagated in closed form under an interface force that is a C1 cubic over the step, the
+dropped high modes answer statically (residual flexibility), and the step size is error-controlled.
 
 Over a step [t0, t0 + h] the contact points' displacement is
     u(tau) = P eta(tau) + R F(tau),     eta_i'' + w_i^2 eta_i = (P' F(tau))_i,
 with P = B Phi over the retained modes (w_i <= w_cut) and R = B K^-1 B' - P W^-2 P' the static
-compliance of the dropped modes at the contacts. `solid.propagation` gives eta and eta' at the
-step's end per unit of each Hermite datum (F0, F0', F1, F1'); so the end displacement u1, velocity
-w1 and acceleration a1 of the contacts are affine in the unknowns X = (F1, F1'):
-    u1 = u1_free + sum_b Cu[b] X_b,   w1 = ...,   a1 = ...       (b over the four data)
-The granules are integrated by RK4 under the cubic Hermite motion through (u0, w0, u1, w1); the map
-X -> G(X) returns the forces at the step's end (eqs. 2, 5) and their time derivative from the
-contact law (`kernels.interface_force_rates`). Newton on X = G(X) uses the contact law's
-derivatives (the granules' sensitivity neglected, the paper's Assumption 3).
+compliance of the dropped modes at the contacts. The force over the step is the cubic through the
+start value F0 and slope F0' (so the force history is C1), the force Fm at mid-step and the end
+force F1: in Hermite form its end slope is F1' = F0' + 4 (F0 + F1 - 2 Fm) / h. The unknowns are
+forces only, X = (F1, Fm): no slope comes from differentiating the stiff contact law.
+`solid.propagation` gives each mode's displacement and velocity per unit Hermite datum
+(F0, F0', F1, F1') at the step's end and at mid-step, so the contacts' end and mid-step motion is
+affine in X. The granules are integrated by RK4 under the cubic Hermite motion through
+(u0, w0, u1, w1); the map X -> G(X) returns the forces (eqs. 2, 5) at the end and at mid-step
+(the granular state there by cubic Hermite interpolation). Newton on X = G(X) uses the contact
+law's derivatives (the granules' sensitivity neglected, the paper's Assumption 3).
 
-Local error estimate of the whole coupled step, checked against rtol and atol:
-  granules: the embedded third-order solution of classical RK4 with the end-of-step derivative
-            (FSAL weights (1, 2, 2, 0, 1)/6): err = h/6 (k4 - k5), per RK4 sub-step;
-  solid:    the end velocity of the contacts under the cubic force against that under the
-            quadratic through (F0, F0', F1) only: the response to kappa tau^2 (tau - h).
-Both estimate the error of a third-order companion (local extrapolation): the accepted step is the
-fourth-order one. A PI controller picks the next step on a geometric grid h_k = h_max 2^(-k/4)
-(so the per-step operators are cached), and a step never crosses a load's kink.
+Local error of the whole coupled step: the embedded third-order solution of classical RK4 with the
+end-of-step derivative (FSAL weights (1, 2, 2, 0, 1)/6, err = h/6 (k4 - k5) per RK4 sub-step) on
+the granules' velocities and spin velocities against atol + rtol v_ref, and the step's defect of
+the energy ledger (13) against its share h / T of ledger_tol e_ref. A PI controller picks the next
+step on a geometric grid h_k = h_max 2^(-k/4) (so the per-step operators are cached), and a step
+never crosses a load's kink.
 """
 
 from __future__ import annotations
@@ -34,8 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..granular.bundles import InterfaceForces, Motion
-from ..granular.contact import contact_law_derivatives
-from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, point_kinematics, rhs, rk4_step
+from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, rhs, rk4_step
 from ..solid.propagation import hermite_taylor, weights_at
 from . import core
 
@@ -52,32 +50,23 @@ class ExactSolid(NamedTuple):
     frame: core.ContactFrame
 
 
-class Ops(NamedTuple):
-    """Per step size h: modal weights hom (nr, 3) = (S0, h S1, -w^2 h S1), wd/wv/wa (nr, 4) the
-    end displacement, velocity and acceleration per unit modal Hermite datum, and the contact
-    operators Cu/Cw/Ca (4, 2nc, 2nc) (the residual compliance included)."""
-
-    hom: np.ndarray
-    wd: np.ndarray
-    wv: np.ndarray
-    wa: np.ndarray
-    Cu: np.ndarray
-    Cw: np.ndarray
-    Ca: np.ndarray
-
-
 class OpsCache(NamedTuple):
-    """Ops of the grid levels h_k = h_max 2^(-k/4), computed on first use (index k), and one
-    slot (the last) for an off-grid step (a step cut at a load's kink)."""
+    """Per step size h (grid level k: h_max 2^(-k/4); the last slot for an off-grid step cut at a
+    load's kink), computed on first use: the modal weights at the end (hom (nr, 3) = (S0, h S1,
+    -w^2 h S1), wd, wv (nr, 4): displacement and velocity per unit modal Hermite datum) and at
+    mid-step (homm), and the contact operators at the end (Cu, Cw) and at mid-step (Cum, Cwm),
+    (4, 2nc, 2nc) each: the contacts' displacement and velocity per unit Hermite datum, the
+    residual compliance included."""
 
     ready: np.ndarray  # (L+1,) bool
     hom: np.ndarray  # (L+1, nr, 3)
     wd: np.ndarray  # (L+1, nr, 4)
     wv: np.ndarray
-    wa: np.ndarray
+    homm: np.ndarray  # (L+1, nr, 3)
     Cu: np.ndarray  # (L+1, 4, 2nc, 2nc)
     Cw: np.ndarray
-    Ca: np.ndarray
+    Cum: np.ndarray
+    Cwm: np.ndarray
 
 
 class ExactConfig(NamedTuple):
@@ -99,8 +88,8 @@ class ExactConfig(NamedTuple):
 
 class ExactState(NamedTuple):
     """The state at the current time (y, modal eta/eta', the interface force F and slope Fd and
-    their modal projections qF = P'F, qFd = P'Fd, the contacts' displacement u, velocity w and
-    acceleration a, |N|, v_t, the granules' derivative dy) and, for dense output, the same at
+    their modal projections qF = P'F, qFd = P'Fd, the contacts' displacement u and velocity w,
+    |N|, v_t, the granules' derivative dy) and, for dense output, the same at
     the previous step's start (suffix 0). clock = [t, t0, err_prev, friction rate of the last
     step, energy ledger (13)]; meta = [level, rejected]."""
 
@@ -114,7 +103,6 @@ class ExactState(NamedTuple):
     qFd: np.ndarray
     u: np.ndarray
     w: np.ndarray
-    a: np.ndarray
     normal: np.ndarray
     vrel: np.ndarray
     y0: np.ndarray
@@ -135,38 +123,44 @@ class Work(NamedTuple):
     rk4: np.ndarray  # (5, len(y))
     k5: np.ndarray
     err: np.ndarray  # embedded error of the granular state
+    ymid: np.ndarray  # the granular state at mid-step
     motion: Motion
-    u1: np.ndarray  # (2nc,)
+    u1: np.ndarray  # (2nc,) the contacts at the end ...
     w1: np.ndarray
-    a1: np.ndarray
-    uf: np.ndarray  # free parts (2nc,)
+    um: np.ndarray  # ... and at mid-step
+    wm: np.ndarray
+    uf: np.ndarray  # their free parts (no force data)
     wf: np.ndarray
-    af: np.ndarray
-    X: np.ndarray  # (4nc,) unknowns (F1, Fd1) flat
-    X_start: np.ndarray
+    umf: np.ndarray
+    wmf: np.ndarray
+    Fd1: np.ndarray  # (2nc,) the end slope the unknowns imply
+    X: np.ndarray  # (4nc,) unknowns (F1, Fm) flat
     G: np.ndarray  # (4nc,)
     J: np.ndarray  # (4nc, 4nc)
     r: np.ndarray
-    iface: InterfaceForces
-    Fdot: np.ndarray  # (nc, 2)
+    iface: InterfaceForces  # at the end
+    iface_m: InterfaceForces  # at mid-step
     ww: np.ndarray  # (nr,) modal scratch
     rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
-    K: np.ndarray  # (nc, 2, 2): d(force rate)/d(force) through the granule's own acceleration
     parts: np.ndarray  # (2,): the last step's scaled velocity error and energy-ledger defect
     qF1: np.ndarray  # (nr,): P' F1 and P' F1' of the trial step
     qFd1: np.ndarray
 
 
 @njit(cache=True)
+def _iface(nc):
+    return InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
+
+
+@njit(cache=True)
 def work_for(y, nc, nr):
     z2 = np.zeros((nc, 2))
     m2 = 2 * nc
-    iface = InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
-    return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y),
-                Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()), np.zeros(m2), np.zeros(m2), np.zeros(m2),
-                np.zeros(m2), np.zeros(m2), np.zeros(m2), np.zeros(2 * m2), np.zeros(2 * m2), np.zeros(2 * m2),
-                np.zeros((2 * m2, 2 * m2)), np.zeros(2 * m2), iface, np.zeros((nc, 2)), np.zeros(nr), np.zeros(1),
-                np.zeros((nc, 2, 2)), np.zeros(2), np.zeros(nr), np.zeros(nr))
+    z = np.zeros(m2)
+    return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
+                Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
+                z.copy(), z.copy(), z.copy(), z.copy(), np.zeros(2 * m2), np.zeros(2 * m2), np.zeros((2 * m2, 2 * m2)),
+                np.zeros(2 * m2), _iface(nc), _iface(nc), np.zeros(nr), np.zeros(1), np.zeros(2), np.zeros(nr), np.zeros(nr))
 
 
 # ---------------------------------------------------------------- per-step operators
@@ -186,106 +180,72 @@ def _contact_operator(P, weight, out):
 
 
 @njit(cache=True)
+def _operators_at(solid, h, tau, hom, Cu, Cw):
+    """Modal free-response weights at tau into a step h, and the contacts' displacement and
+    velocity there per unit Hermite datum (4, 2nc, 2nc), the residual part R F(tau) included."""
+    omega, P, R = solid.omega, solid.P, solid.R
+    nr = omega.shape[0]
+    m2 = P.shape[0]
+    wd, wv, wa = np.empty((nr, 4)), np.empty((nr, 4)), np.empty((nr, 4))
+    weights_at(omega, h, tau, hom, wd, wv, wa)
+    col = np.empty(nr)
+    for b in range(4):
+        for i in range(nr):
+            col[i] = wd[i, b]
+        _contact_operator(P, col, Cu[b])
+        for i in range(nr):
+            col[i] = wv[i, b]
+        _contact_operator(P, col, Cw[b])
+    T = np.empty((4, 4))
+    hermite_taylor(h, T)
+    for b in range(4):  # H_b(tau) and H_b'(tau) from the basis' Taylor coefficients
+        hb = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
+        dhb = T[b, 1] + T[b, 2] * tau + 0.5 * T[b, 3] * tau * tau
+        for r in range(m2):
+            for q in range(m2):
+                Cu[b, r, q] += hb * R[r, q]
+                Cw[b, r, q] += dhb * R[r, q]
+    return wd, wv
+
+
+@njit(cache=True)
 def ensure_ops(cache, solid, slot, h):
     """Fill `cache` slot `slot` for step size h (once per grid level; always for the off-grid slot)."""
     if cache.ready[slot]:
         return
-    omega, P, R = solid.omega, solid.P, solid.R
-    nr = omega.shape[0]
-    m2 = P.shape[0]
-    weights_at(omega, h, h, cache.hom[slot], cache.wd[slot], cache.wv[slot], cache.wa[slot])
-    col = np.empty(nr)
-    for b in range(4):
-        for i in range(nr):
-            col[i] = cache.wd[slot, i, b]
-        _contact_operator(P, col, cache.Cu[slot, b])
-        for i in range(nr):
-            col[i] = cache.wv[slot, i, b]
-        _contact_operator(P, col, cache.Cw[slot, b])
-        for i in range(nr):
-            col[i] = cache.wa[slot, i, b]
-        _contact_operator(P, col, cache.Ca[slot, b])
-    # residual (static) part u = R F(tau): F(h) = F1, F'(h) = F1', F''(h) from the Hermite basis
-    T = np.empty((4, 4))
-    hermite_taylor(h, T)
-    for b in range(4):
-        f2 = T[b, 2] + T[b, 3] * h  # second derivative of H_b at h
-        for r in range(m2):
-            for q in range(m2):
-                if b == 2:
-                    cache.Cu[slot, b, r, q] += R[r, q]
-                if b == 3:
-                    cache.Cw[slot, b, r, q] += R[r, q]
-                cache.Ca[slot, b, r, q] += f2 * R[r, q]
+    wd, wv = _operators_at(solid, h, h, cache.hom[slot], cache.Cu[slot], cache.Cw[slot])
+    cache.wd[slot, :, :] = wd
+    cache.wv[slot, :, :] = wv
+    _operators_at(solid, h, 0.5 * h, cache.homm[slot], cache.Cum[slot], cache.Cwm[slot])
     cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
 
 
-# ---------------------------------------------------------------- the interface map with slopes
-
-
-@njit(cache=True)
-def interface_force_rates(y, dy, model, u, w, a, out_Fd, K):
-    """d/dt of the forces on the solid at its contact points, from the contact law's derivatives
-    (eqs. 2, 5) and the rates of overlap, overlap rate and tangential velocity: the granule's
-    velocity and acceleration (y, dy) against the points' displacement u, velocity w and
-    acceleration a (flat 2nc). K[c] = d(force rate)/d(force on the solid) through the granule's
-    own acceleration (-F/m, spin -R (F.t)/I): stiff where friction is."""
-    gr = model.granules
-    radius = gr.radius
-    n = radius.shape[0]
-    V = 3 * n
-    OM = 5 * n
-    points = model.points
-    mu, k_s = model.law.mu, model.law.k_s
-    for c in range(points.g.shape[0]):
-        out_Fd[c, 0] = 0.0
-        out_Fd[c, 1] = 0.0
-        i, delta, nx, ny, tx, ty, rvx, rvy, vt = point_kinematics(y, model, c, u[2 * c], u[2 * c + 1], w[2 * c], w[2 * c + 1])
-        if delta <= 0.0:
-            continue
-        rax = dy[V + 2 * i] - a[2 * c]
-        ray = dy[V + 2 * i + 1] - a[2 * c + 1]
-        dd = rvx * nx + rvy * ny  # overlap rate
-        ddd = rax * nx + ray * ny  # its rate
-        dvt = rax * tx + ray * ty + radius[i] * dy[OM + i]
-        dfn_d, dfn_dd, dft_d, dft_dd, dft_dv = contact_law_derivatives(points.A[c], points.G[c], delta, dd, vt, mu, k_s)
-        fn_dot = dfn_d * dd + dfn_dd * ddd
-        ft_dot = dft_d * dd + dft_dd * ddd + dft_dv * dvt
-        out_Fd[c, 0] = fn_dot * nx - ft_dot * tx
-        out_Fd[c, 1] = fn_dot * ny - ft_dot * ty
-        inv_m = 1.0 / gr.mass[i]
-        spin = radius[i] * radius[i] / gr.inertia[i]
-        for b in range(2):
-            nb = nx if b == 0 else ny
-            tb = tx if b == 0 else ty
-            dfn = -dfn_dd * inv_m * nb  # d(fn rate) / dF_b
-            dft = -dft_dd * inv_m * nb - dft_dv * (inv_m + spin) * tb
-            K[c, 0, b] = nx * dfn - tx * dft
-            K[c, 1, b] = ny * dfn - ty * dft
+# ---------------------------------------------------------------- the interface map
 
 
 @njit(cache=True)
 def _motion_and_ends(st, cache, slot, h, w):
-    """The contacts' end displacement, velocity and acceleration for the unknowns in w.X, and the
-    cubic Hermite motion through (u0, w0, u1, w1) for the RK4 of the granules."""
+    """For the unknowns w.X = (F1, Fm): the end slope F1' = F0' + 4 (F0 + F1 - 2 Fm) / h, the
+    contacts' displacement and velocity at the end and at mid-step, and the cubic Hermite motion
+    through (u0, w0, u1, w1) for the RK4 of the granules."""
     m2 = st.u.shape[0]
     X = w.X
+    for q in range(m2):
+        w.Fd1[q] = st.Fd[q // 2, q % 2] + 4.0 * (st.F[q // 2, q % 2] + X[q] - 2.0 * X[m2 + q]) / h
     for r in range(m2):
-        u1 = w.uf[r]
-        w1 = w.wf[r]
-        a1 = w.af[r]
+        u1, w1, um, wm = w.uf[r], w.wf[r], w.umf[r], w.wmf[r]
         for q in range(m2):
-            F0q = st.F[q // 2, q % 2]
-            Fd0q = st.Fd[q // 2, q % 2]
-            u1 += cache.Cu[slot, 0, r, q] * F0q + cache.Cu[slot, 1, r, q] * Fd0q + cache.Cu[slot, 2, r, q] * X[q] \
-                + cache.Cu[slot, 3, r, q] * X[m2 + q]
-            w1 += cache.Cw[slot, 0, r, q] * F0q + cache.Cw[slot, 1, r, q] * Fd0q + cache.Cw[slot, 2, r, q] * X[q] \
-                + cache.Cw[slot, 3, r, q] * X[m2 + q]
-            a1 += cache.Ca[slot, 0, r, q] * F0q + cache.Ca[slot, 1, r, q] * Fd0q + cache.Ca[slot, 2, r, q] * X[q] \
-                + cache.Ca[slot, 3, r, q] * X[m2 + q]
-        w.u1[r] = u1
-        w.w1[r] = w1
-        w.a1[r] = a1
+            data0 = st.F[q // 2, q % 2]
+            data1 = st.Fd[q // 2, q % 2]
+            u1 += cache.Cu[slot, 0, r, q] * data0 + cache.Cu[slot, 1, r, q] * data1 + cache.Cu[slot, 2, r, q] * X[q] \
+                + cache.Cu[slot, 3, r, q] * w.Fd1[q]
+            w1 += cache.Cw[slot, 0, r, q] * data0 + cache.Cw[slot, 1, r, q] * data1 + cache.Cw[slot, 2, r, q] * X[q] \
+                + cache.Cw[slot, 3, r, q] * w.Fd1[q]
+            um += cache.Cum[slot, 0, r, q] * data0 + cache.Cum[slot, 1, r, q] * data1 + cache.Cum[slot, 2, r, q] * X[q] \
+                + cache.Cum[slot, 3, r, q] * w.Fd1[q]
+            wm += cache.Cwm[slot, 0, r, q] * data0 + cache.Cwm[slot, 1, r, q] * data1 + cache.Cwm[slot, 2, r, q] * X[q] \
+                + cache.Cwm[slot, 3, r, q] * w.Fd1[q]
+        w.u1[r], w.w1[r], w.um[r], w.wm[r] = u1, w1, um, wm
         c = r // 2
         d = r % 2
         u0, v0 = st.u[r], st.w[r]
@@ -319,49 +279,55 @@ def _rk4_with_estimate(y, t, h, model, motion, rate, w):
 
 @njit(cache=True)
 def hermite_map(st, t, h, model, cache, slot, rate, w, derivatives):
-    """X = (F1, F1') -> G(X): the end forces and their slopes after RK4 of the granules under the
-    contacts' motion that X implies. Fills w.G, w.iface (with the law's derivatives if asked),
-    w.ytr, w.k5, w.err. False if the granular state stopped being finite."""
+    """X = (F1, Fm) -> G(X): the forces at the step's end and at mid-step after RK4 of the
+    granules under the contacts' motion that X implies. Fills w.G, w.iface, w.iface_m (with the
+    law's derivatives if asked), w.ytr, w.k5, w.err. False if the granular state stopped being
+    finite."""
     _motion_and_ends(st, cache, slot, h, w)
     if not _rk4_with_estimate(st.y, t, h, model, w.motion, rate, w):
         return False
     nc = st.F.shape[0]
     m2 = 2 * nc
-    u1 = w.u1.reshape(nc, 2)
-    w1 = w.w1.reshape(nc, 2)
-    interface_forces(w.ytr, model, u1, w1, w.iface, derivatives)
-    interface_force_rates(w.ytr, w.k5, model, w.u1, w.w1, w.a1, w.Fdot, w.K)
+    # the granules at mid-step: RK4 over the first half under the same motion (fifth-order locally)
+    w.ymid[:] = st.y
+    m = max(1, int(math.ceil(rate * 0.5 * h / 2.0)))
+    for k in range(m):
+        rk4_step(w.ymid, t + k * 0.5 * h / m, 0.5 * h / m, model, w.motion, k * 0.5 * h / m, w.rk4)
+    interface_forces(w.ytr, model, w.u1.reshape(nc, 2), w.w1.reshape(nc, 2), w.iface, derivatives)
+    interface_forces(w.ymid, model, w.um.reshape(nc, 2), w.wm.reshape(nc, 2), w.iface_m, derivatives)
     for r in range(m2):
         w.G[r] = w.iface.F[r // 2, r % 2]
-        w.G[m2 + r] = w.Fdot[r // 2, r % 2]
+        w.G[m2 + r] = w.iface_m.F[r // 2, r % 2]
     return True
 
 
 @njit(cache=True)
-def _newton_step(w, cache, slot, h, frame, law):
-    """X <- X + dX, (I - J) dX = G - X with J = [[Du Cu + Dw Cw], [Du Cw + Dw Ca]] over the unknown
-    data (F1, F1'); then the exact local friction root where the friction map is not contractive."""
-    m2 = w.u1.shape[0]
-    nc = m2 // 2
-    Du, Dw = w.iface.Du, w.iface.Dw
-    J = w.J
+def _jacobian_rows(J, row0, Du, Dw, Cu, Cw, h):
+    """Rows row0.. of J = dG/dX for one evaluation point (end or mid-step): the forces there move
+    with the point's displacement (Du) and velocity (Dw), which move with F1 directly (Hermite
+    datum 2) and through the slope F1' (datum 3, dF1'/dF1 = 4/h, dF1'/dFm = -8/h)."""
+    m2 = Cu.shape[1]
     for r in range(m2):
         c = r // 2
         d = r % 2
-        for qb in range(2):  # unknown block: F1 (b = 2) or F1' (b = 3)
-            b = 2 + qb
-            for q in range(m2):
-                ju = Du[c, d, 0] * cache.Cu[slot, b, 2 * c, q] + Du[c, d, 1] * cache.Cu[slot, b, 2 * c + 1, q]
-                jw = Dw[c, d, 0] * cache.Cw[slot, b, 2 * c, q] + Dw[c, d, 1] * cache.Cw[slot, b, 2 * c + 1, q]
-                J[r, qb * m2 + q] = -(ju + jw)
-                ju2 = Du[c, d, 0] * cache.Cw[slot, b, 2 * c, q] + Du[c, d, 1] * cache.Cw[slot, b, 2 * c + 1, q]
-                jw2 = Dw[c, d, 0] * cache.Ca[slot, b, 2 * c, q] + Dw[c, d, 1] * cache.Ca[slot, b, 2 * c + 1, q]
-                J[m2 + r, qb * m2 + q] = -(ju2 + jw2)
-    # the force rate also moves with the end force itself (the granule's own acceleration): + K J_F
-    for c in range(nc):
-        for d in range(2):
-            for q in range(2 * m2):
-                J[m2 + 2 * c + d, q] += w.K[c, d, 0] * J[2 * c, q] + w.K[c, d, 1] * J[2 * c + 1, q]
+        for q in range(m2):
+            u2 = Du[c, d, 0] * Cu[2, 2 * c, q] + Du[c, d, 1] * Cu[2, 2 * c + 1, q] \
+                + Dw[c, d, 0] * Cw[2, 2 * c, q] + Dw[c, d, 1] * Cw[2, 2 * c + 1, q]
+            u3 = Du[c, d, 0] * Cu[3, 2 * c, q] + Du[c, d, 1] * Cu[3, 2 * c + 1, q] \
+                + Dw[c, d, 0] * Cw[3, 2 * c, q] + Dw[c, d, 1] * Cw[3, 2 * c + 1, q]
+            J[row0 + r, q] = -(u2 + 4.0 / h * u3)
+            J[row0 + r, m2 + q] = 8.0 / h * u3
+
+
+@njit(cache=True)
+def _newton_step(w, cache, slot, h, frame, law):
+    """X <- X + dX, (I - J) dX = G - X; then the exact local friction root for the end force where
+    the friction map is not contractive (the tangential velocity response to F1 at fixed Fm)."""
+    m2 = w.u1.shape[0]
+    nc = m2 // 2
+    J = w.J
+    _jacobian_rows(J, 0, w.iface.Du, w.iface.Dw, cache.Cu[slot], cache.Cw[slot], h)
+    _jacobian_rows(J, m2, w.iface_m.Du, w.iface_m.Dw, cache.Cum[slot], cache.Cwm[slot], h)
     for r in range(2 * m2):
         J[r, r] += 1.0
         w.r[r] = w.G[r] - w.X[r]
@@ -369,14 +335,16 @@ def _newton_step(w, cache, slot, h, frame, law):
     for c in range(nc):
         tx, ty = frame.tangent[c, 0], frame.tangent[c, 1]
         sj = w.X[2 * c] * tx + w.X[2 * c + 1] * ty
-        w.X[2 * c] += dX[2 * c]
-        w.X[2 * c + 1] += dX[2 * c + 1]
-        w.X[m2 + 2 * c] += dX[m2 + 2 * c]
-        w.X[m2 + 2 * c + 1] += dX[m2 + 2 * c + 1]
+        for k in (2 * c, 2 * c + 1, m2 + 2 * c, m2 + 2 * c + 1):
+            w.X[k] += dX[k]
         if w.iface.normal[c] <= 0.0 or not frame.has_tangent[c]:
             continue
-        ctt = tx * (cache.Cw[slot, 2, 2 * c, 2 * c] * tx + cache.Cw[slot, 2, 2 * c, 2 * c + 1] * ty) \
-            + ty * (cache.Cw[slot, 2, 2 * c + 1, 2 * c] * tx + cache.Cw[slot, 2, 2 * c + 1, 2 * c + 1] * ty)
+        ctt = 0.0
+        for a in range(2):
+            ta = tx if a == 0 else ty
+            for b in range(2):
+                tb = tx if b == 0 else ty
+                ctt += ta * (cache.Cw[slot, 2, 2 * c + a, 2 * c + b] + 4.0 / h * cache.Cw[slot, 3, 2 * c + a, 2 * c + b]) * tb
         muN = law.mu * w.iface.normal[c]
         if muN * law.k_s * ctt <= 1.0:
             continue
@@ -392,11 +360,10 @@ def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
     iterations); on success w holds the end state."""
     nc = st.F.shape[0]
     m2 = 2 * nc
-    # guess: the end values continue the start with its slope
+    # guess: the force continues from the start along its slope
     for r in range(m2):
         w.X[r] = st.F[r // 2, r % 2] + h * st.Fd[r // 2, r % 2]
-        w.X[m2 + r] = st.Fd[r // 2, r % 2]
-    w.X_start[:] = w.X
+        w.X[m2 + r] = st.F[r // 2, r % 2] + 0.5 * h * st.Fd[r // 2, r % 2]
     mo = w.motion
     for c in range(nc):
         mo.u0[c, 0] = st.u[2 * c]
@@ -410,10 +377,8 @@ def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
             w.X[:] = w.G
             return core.CONVERGED, it
         ok = True
-        for r in range(m2):
-            F = w.X[r]
-            tol = cfg.abstol + cfg.reltol * abs(F)
-            if abs(w.G[r] - F) > tol or h * abs(w.G[m2 + r] - w.X[m2 + r]) > tol + cfg.reltol * h * abs(w.X[m2 + r]):
+        for r in range(2 * m2):
+            if abs(w.G[r] - w.X[r]) > cfg.abstol + cfg.reltol * abs(w.X[r]):
                 ok = False
         if ok or not cfg.newton:
             w.X[:] = w.G
@@ -432,13 +397,12 @@ def trial_ledger(st, solid, cache, slot, model, w):
     """E_solid + E_granular + D - W (eq. 13) at the end of the trial step: the modes' energy from
     their exact end state (P' F1, P' F1' kept in w for the accept), the dropped modes' static
     energy 1/2 F1' R F1, the granules' energy (11) and the ledger's accumulators."""
-    from_ = w.X
     m2 = st.u.shape[0]
     nr = st.eta.shape[0]
-    f1 = from_[:m2].copy()
+    f1 = w.X[:m2].copy()
     if nr > 0:
         w.qF1[:] = np.dot(f1, solid.P)
-        w.qFd1[:] = np.dot(from_[m2:].copy(), solid.P)
+        w.qFd1[:] = np.dot(w.Fd1, solid.P)
     hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
     es = 0.0
     for i in range(nr):
@@ -487,7 +451,7 @@ def accept(st, solid, cache, slot, h, w, rate, ledger):
     st.qF0[:] = st.qF
     st.qFd0[:] = st.qFd
     f1 = w.X[:m2].copy()
-    fd1 = w.X[m2:].copy()
+    fd1 = w.Fd1
     qF1, qFd1 = w.qF1, w.qFd1  # from `trial_ledger`
     hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
     for i in range(nr):
@@ -502,7 +466,6 @@ def accept(st, solid, cache, slot, h, w, rate, ledger):
         st.Fd[r // 2, r % 2] = fd1[r]
         st.u[r] = w.u1[r]
         st.w[r] = w.w1[r]
-        st.a[r] = w.a1[r]
     mo, sm = w.motion, st.step_motion
     sm.u0[:, :] = mo.u0
     sm.v0[:, :] = mo.v0
@@ -536,25 +499,23 @@ def friction_slopes(st, law, cache, slot, frame, lam):
 
 @njit(cache=True)
 def free_response(st, solid, cache, slot, w):
-    """The contacts' end displacement, velocity and acceleration with no interface force data
-    (w.uf, w.wf, w.af): P applied to the free modal response."""
+    """The contacts' displacement and velocity at the end and at mid-step with no force data
+    (w.uf, w.wf, w.umf, w.wmf): P applied to the modes' free response."""
     nr = st.eta.shape[0]
     if nr == 0:
         w.uf[:] = 0.0
         w.wf[:] = 0.0
-        w.af[:] = 0.0
+        w.umf[:] = 0.0
+        w.wmf[:] = 0.0
         return
-    hom = cache.hom[slot]
     ww = w.ww
-    for i in range(nr):
-        ww[i] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
-    w.uf[:] = np.dot(solid.P, ww)
-    for i in range(nr):
-        ww[i] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
-    w.wf[:] = np.dot(solid.P, ww)
-    for i in range(nr):
-        ww[i] = -solid.omega[i] ** 2 * (hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i])
-    w.af[:] = np.dot(solid.P, ww)
+    for hom, out_u, out_w in ((cache.hom[slot], w.uf, w.wf), (cache.homm[slot], w.umf, w.wmf)):
+        for i in range(nr):
+            ww[i] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
+        out_u[:] = np.dot(solid.P, ww)
+        for i in range(nr):
+            ww[i] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
+        out_w[:] = np.dot(solid.P, ww)
 
 
 @njit(cache=True)

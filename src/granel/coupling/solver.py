@@ -215,9 +215,9 @@ class ExactSolver:
         h_max = settings.dt if fixed else settings.max_step
         nr, m2 = len(omega), 2 * nc
         L = levels + 2
+        z4 = lambda: np.zeros((L, 4, m2, m2))  # noqa: E731
         self.cache = exact.OpsCache(np.zeros(L, bool), np.zeros((L, nr, 3)), np.zeros((L, nr, 4)), np.zeros((L, nr, 4)),
-                                    np.zeros((L, nr, 4)), np.zeros((L, 4, m2, m2)), np.zeros((L, 4, m2, m2)),
-                                    np.zeros((L, 4, m2, m2)))
+                                    np.zeros((L, nr, 3)), z4(), z4(), z4(), z4())
         self.cfg = exact.ExactConfig(float(h_max), int(levels), not fixed, float(settings.rtol), float(settings.atol),
                                      float(v_ref), float(e_ref), float(settings.ledger_tol), float(schedule.duration), True, float(settings.abstol), float(settings.reltol),
                                      int(settings.max_iterations), float(self.stepper.max_disp))
@@ -242,8 +242,7 @@ class ExactSolver:
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         from ..granular.bundles import Motion
 
-        self.st = self._exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(2 * nc), z(nc),
-                                         z(nc), y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr),
+        self.st = self._exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr),
                                          Motion(zc(), zc(), zc(), zc()), np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y)]),
                                          np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
         self.t_out = 0.0
