@@ -15,10 +15,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse.linalg import splu
 
+from ..granular.bundles import Motion
+from ..granular.kernels import rhs
 from ..granular.system import GranularSystem, GranularState, Stepper
 from ..solid.base import SolidModel
-from . import core
+from . import core, exact
 
 METHODS = ("fast", "paper")
 LOG_CAPACITY = 65536
@@ -183,14 +186,12 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
 
 class ExactSolver:
     """The fast method with the exact modal integrator (`coupling.exact`): retained modes below
-    `mode_cutoff` propagated in closed form under a cubic Hermite interface force, the dropped
-    modes' static compliance at the contacts, Newton on the end forces and slopes, and
-    error-controlled steps with dense output at the output times."""
+    `mode_cutoff` propagated in closed form under a C1 cubic interface force, the dropped modes'
+    static compliance at the contacts, Newton on the end and mid-step forces, and error-controlled
+    steps with dense output at the output times."""
 
     def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
                  schedule, modes=None, v_ref: float = 1.0, e_ref: float = 1.0, kinks=()):
-        from . import exact
-
         self.system, self.model, self.settings, self.schedule = system, model, settings, schedule
         self.y0 = state0.y.copy()
         self.stepper = Stepper(system, substep=True)
@@ -228,26 +229,22 @@ class ExactSolver:
         self.log = core.StepLog(np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY, np.int64),
                                 np.zeros((LOG_CAPACITY, nc)))
         self.t_out = 0.0
-        self._exact = exact
 
     @property
     def name(self) -> str:
         return "fast"
 
     def start(self) -> None:
-        from ..granular.kernels import rhs
-
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y = self.y0.copy()
         dy = np.zeros_like(y)
         rhs(0.0, y, dy, self.stepper.model, self.stepper._still, 0.0)
         z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
-        from ..granular.bundles import Motion
-
-        self.st = self._exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr),
-                                         Motion(zc(), zc(), zc(), zc()), np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y)]),
-                                         np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
+        self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
+                                   y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr), Motion(zc(), zc(), zc(), zc()),
+                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y)]),
+                                   np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
         self.t_out = 0.0
 
     def _ledger(self, y) -> float:
@@ -263,11 +260,9 @@ class ExactSolver:
         return out
 
     def load(self, arrays: dict) -> None:
-        from ..granular.bundles import Motion
-
         motion = Motion(*[np.array(arrays[f"motion:{k}"]) for k in Motion._fields])
-        self.st = self._exact.ExactState(*[motion if k == "step_motion" else np.array(arrays[f"st:{k}"])
-                                           for k in self._exact.ExactState._fields])
+        self.st = exact.ExactState(*[motion if k == "step_motion" else np.array(arrays[f"st:{k}"])
+                                           for k in exact.ExactState._fields])
         self.stepper.refresh(arrays["ref_pos"])
         self.t_out = float(arrays["t_out"])
 
@@ -280,7 +275,7 @@ class ExactSolver:
         target = k * self.schedule.per * self.settings.dt
         st = self.st
         while st.clock[0] < target * (1 - 1e-12):
-            status, m = self._exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache,
+            status, m = exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache,
                                                   self.cfg, target, self.kinks, self.log)
             if m:
                 trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
@@ -297,7 +292,7 @@ class ExactSolver:
     def _dense(self):
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
-        self._exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
+        exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
         return y, eta, etad, F
 
     def observe(self) -> dict:
@@ -326,7 +321,5 @@ class ExactSolver:
 
 def residual_compliance(model: SolidModel, B, P, omega) -> np.ndarray:
     """R = B K^-1 B' - P W^-2 P': the static compliance of the dropped modes at the contacts."""
-    from scipy.sparse.linalg import splu
-
     full = B @ splu(model.K.tocsc()).solve(B.T.toarray())
     return np.ascontiguousarray(full - (P / omega**2) @ P.T)
