@@ -30,6 +30,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .plots import Q8_OUTLINE  # noqa: E402
+
 # the paper's magnification of the deformation movies (Appendix C)
 MAGNIFICATION = {"weak": 5000.0, "moderate": 1000.0, "strong": 200.0}
 FIELDS = ("deformation", "energy-density")
@@ -39,8 +41,6 @@ CMAP = "inferno"
 # x264 speed preset: at the same constant quality (quality=7, CRF 15) 'veryfast' takes about half the
 # encoder time of the default 'medium' for a file about 3 % larger
 X264_PRESET = "veryfast"
-# corner, mid-side, corner, ... around a Q8 element (as plots._element_outlines)
-_Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]
 
 
 def default_magnification(ds) -> float:
@@ -108,19 +108,16 @@ def granule_states(ds, idx: np.ndarray) -> np.ndarray:
 def granule_energies(system, Y: np.ndarray, SU: np.ndarray | None = None) -> np.ndarray:
     """Per-granule energy (kinetic + rotational + contact-potential share, eq. 11) for each state
     row of Y, with contact points displaced by SU[f] (nc, 2). One Stepper serves all frames; its
-    neighbour list is rebuilt only when a granule has moved by half the skin since the last build,
-    so it always holds every touching pair, in the order a fresh list would (the energies equal
-    those of figures.granule_energies_at)."""
-    from .granular.system import GranularState, Stepper, build_neighbours
+    neighbour list is rebuilt (`Stepper.maybe_refresh`) only when a granule has moved by half the
+    skin since the last build, so it always holds every touching pair, in the order a fresh list
+    would (figures.granule_energies_at is this for one frame)."""
+    from .granular.system import GranularState, Stepper
 
     n = system.n
     st = Stepper(system)
-    limit = 0.5 * system.skin / np.sqrt(2.0)
     out = np.empty((len(Y), n))
     for f, y in enumerate(Y):
-        pos = y[: 2 * n].reshape(-1, 2)
-        if np.max(np.abs(pos - st.nl.ref_pos), initial=0.0) >= limit:
-            st.nl = build_neighbours(system, pos.copy())
+        st.maybe_refresh(y[: 2 * n].reshape(-1, 2))
         kin, rot, pot = st.energies(GranularState(y, 0.0), None if SU is None else SU[f])
         out[f] = kin + rot + pot
     return out
@@ -197,7 +194,7 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
             Q, _ = solid_states(ds, times, modes)
             U = np.stack([model.full_displacement(q) for q in Q])  # (F, nn, 2)
             if model.kind == "plate":
-                plan.plate_verts = (model.nodes[None] + mag * U)[:, model.elements[:, _Q8_OUTLINE]]
+                plan.plate_verts = (model.nodes[None] + mag * U)[:, model.elements[:, Q8_OUTLINE]]
             else:
                 plan.beam_x = model.nodes[None, :, 0] + mag * U[:, :, 0]
                 plan.beam_y = model.nodes[:, 1].copy()
@@ -424,7 +421,6 @@ def animate(ds, out, field: str = "deformation", magnification: float | None = N
     x200 for weak / moderate / strong shocks unless `magnification` is given) or the normalised
     energy density w / w0 of eq. (14) on a log colour scale [1e-6, 1]. Returns the written path
     (.mp4, or .gif if the MP4 encoder is unavailable)."""
-    _check_field(field)
     plan = plan_frames(ds, field, magnification, max_frames)
     return write_movie(lambda: iter_frames(plan), Path(out), fps)
 
@@ -559,14 +555,6 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
     return [Path(results[k][1]) for k in range(len(jobs))]
 
 
-def paper_movie_jobs(results: dict, out_dir, max_frames: int = 120, fps: int = 20) -> list[MovieJob]:
-    """The Appendix C movie jobs for result files keyed by case tag (e.g. 'plate-SSGMC-strong'):
-    both fields of each, the deformation at the paper's magnification of its shock level."""
-    out_dir = Path(out_dir)
-    return [MovieJob(Path(p), out_dir / f"{tag}-{f}.mp4", f, None, max_frames, fps)
-            for tag, p in results.items() for f in FIELDS]
-
-
 __all__ = ["MAGNIFICATION", "FIELDS", "FramePlan", "MovieFigure", "MovieJob", "MovieError", "animate", "default_magnification",
-           "frame_indices", "granule_energies", "iter_frames", "paper_movie_jobs", "plan_frames", "render_movies",
+           "frame_indices", "granule_energies", "iter_frames", "plan_frames", "render_movies",
            "solid_states", "write_movie"]

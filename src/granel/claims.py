@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .analysis.modal import modal_coordinates, modal_energies, modes_for_fraction, time_averaged_shares
+from .analysis.modal import modes_for_fraction, time_averaged_shares
 from .analysis.reciprocity import arrival_time, directed_velocity, excitation_of
 from .analysis.signals import dominant_frequency, peak_time, peak_width, zero_crossing_frequency
 
@@ -42,17 +42,6 @@ def case_tag(case) -> str:
 
 
 # ---------------------------------------------------------------- measurements of one run
-
-
-def _modal_energy_history(ds):
-    """(solid times, modal energies (nt, nm), omega) of a run, eq. (15)."""
-    model = None
-    if "solid_x" in ds:  # a solid too large for all modes stores the reduced state: project it
-        from .figures import model_of
-
-        model = model_of(ds)[2]
-    t, X, Xd, w = modal_coordinates(ds, None, model)
-    return t, modal_energies(X, Xd, w), w
 
 
 def potential_dominance(ds, threshold: float = ACTIVE, after: float | None = None) -> float:
@@ -78,6 +67,8 @@ def peak_end(t, e) -> float:
 
 def run_measures(ds) -> dict:
     """The numbers of one run that the claims use (energies as fractions of the input work)."""
+    from .figures import modal_energy_history
+
     t = ds["time"].values
     w = float(ds["input_work"].values.max())
     es = ds["energy_solid"].values
@@ -86,7 +77,7 @@ def run_measures(ds) -> dict:
     label, _ = excitation_of(ds)
     far = "energy_ssgm" if label.startswith("LSGM") else "energy_lsgm"
     d = (ds["dissipated_viscous"].values + ds["dissipated_friction"].values) / w
-    ts, E, omega = _modal_energy_history(ds)
+    ts, E, omega = modal_energy_history(ds)
     shares = time_averaged_shares(E, ts)
     acc = np.cumsum(shares)
     j = int(np.argmax(E.sum(axis=1)))

@@ -46,6 +46,13 @@ def model_of(ds):
     return built_from_result(ds)
 
 
+def modal_energy_history(ds, modes=None):
+    """(solid times, modal energies (nt, nm) of eq. (15), omega) of a run; a solid too large for
+    all modes stores the reduced state, projected here on the modes of its model."""
+    t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
+    return t, modal_energies(X, Xd, w), w
+
+
 def solid_state_at(ds, time: float, modes=None):
     """The solid's reduced (q, v) at the stored solid time closest to `time`, and its index."""
     from .analysis.solid import nearest_solid_outputs, reduced_states
@@ -58,7 +65,7 @@ def fig3_velocities(fwd, bwd, out, window=(4e-4, 8e-4)):
     """Fig. 3: (a) the shock; (b) v_3C (granule 3 when C is shocked) and v_C3; (c) their amplitude
     spectra over `window` (the text's "lower frequency content for v_3C ... especially for
     tau > 0.6 ms"), with the dominant frequencies marked."""
-    from .analysis.signals import amplitude_spectrum, dominant_frequency
+    from .analysis.signals import amplitude_spectrum, spectrum_peak
     from .excitation import SHOCK_LEVELS
 
     A, dA = excitation_of(fwd)
@@ -82,7 +89,7 @@ def fig3_velocities(fwd, bwd, out, window=(4e-4, 8e-4)):
         t = ds["time"].values
         ax2.plot(t * 1e3, v, color=f"C{k}", label=label)
         f, S = amplitude_spectrum(t, v, window)
-        fd = dominant_frequency(t, v, window)
+        fd = spectrum_peak(f, S)
         ax3.plot(f / 1e3, S, color=f"C{k}", label=f"{label.split(':')[0]}: dominant {fd / 1e3:.1f} kHz")
         ax3.axvline(fd / 1e3, color=f"C{k}", lw=0.8, ls=":")
     ax2.axvspan(window[0] * 1e3, window[1] * 1e3, color="0.9", zorder=0, label="window of (c)")
@@ -156,24 +163,12 @@ def _fig4_inset(ax, runs, color, tmax=0.2):
 
 
 def granule_energies_at(ds, k: int, su=None):
-    """Per-granule energy (kinetic + rotational + contact share) at output index k."""
-    from .granular.system import GranularState, Stepper
+    """Per-granule energy (kinetic + rotational + contact share) at output index k, with the
+    solid contact points displaced by su (nc, 2): `animate.granule_energies` for one frame."""
+    from .animate import granule_energies, granule_states
 
-    sc, system, model = model_of(ds)
-    n = system.n
-    y = np.zeros(6 * n + 3)
-    y[0 : 2 * n : 2] = ds["x"].values[k]
-    y[1 : 2 * n : 2] = ds["y"].values[k]
-    y[2 * n : 3 * n] = ds["theta"].values[k]
-    y[3 * n : 5 * n : 2] = ds["v_x"].values[k]
-    y[3 * n + 1 : 5 * n : 2] = ds["v_y"].values[k]
-    y[5 * n : 6 * n] = ds["omega"].values[k]
-    st = Stepper(system)
-    from .granular.system import build_neighbours
-
-    st.nl = build_neighbours(system, y[: 2 * n].reshape(-1, 2))
-    kin, rot, pot = st.energies(GranularState(y, 0.0), su)
-    return kin + rot + pot, system
+    system = model_of(ds)[1]
+    return granule_energies(system, granule_states(ds, [k]), None if su is None else su[None])[0], system
 
 
 def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=None):
@@ -286,8 +281,7 @@ def fig7_modal_accumulation(runs: dict, out, counts=(6, 100, 1000), modes=None):
         ds = runs.get(("plate", exc, "strong"))
         if ds is None:
             continue
-        t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
-        E = modal_energies(X, Xd, w)
+        t, E, _ = modal_energy_history(ds, modes)
         win = float(ds["input_work"].values.max())
         ax.plot(t * 1e3, 100 * E.sum(axis=1) / win, "k", lw=1.5, label="total")
         for n, y in accumulated_modal_energy(E, counts).items():
@@ -315,8 +309,8 @@ def fig8_solid_partition(runs: dict, out):
 
 
 def time_averaged(ds, modes=None):
-    t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
-    return time_averaged_accumulation(modal_energies(X, Xd, w), t)
+    t, E, _ = modal_energy_history(ds, modes)
+    return time_averaged_accumulation(E, t)
 
 
 def fig9_time_averaged(runs: dict, out, nmax=1000):

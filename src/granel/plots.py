@@ -11,6 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
+Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
+
 
 def save(fig, path: str | Path, dpi: int = 200) -> Path:
     path = Path(path)
@@ -62,8 +64,7 @@ def plot_geometry(sc, output: str | Path, ax=None):
 def _element_outlines(model, disp=None, scale=0.0):
     """Polygons (one per element) through the Q8 corner and mid-side nodes."""
     xy = model.nodes + (scale * disp if disp is not None else 0.0)
-    order = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid, corner, ... around the element
-    return [xy[e[order]] for e in model.elements]
+    return [xy[e[Q8_OUTLINE]] for e in model.elements]
 
 
 def draw_plate(ax, model, disp=None, scale=0.0, color="k", lw=0.3, field=None, cmap="viridis", vmin=None, vmax=None):

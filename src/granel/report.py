@@ -167,7 +167,7 @@ def write_report(out: Path, m: dict, walls: dict, figures: list, total_s: float,
     path.write_text("\n".join(lines) + "\n")
     dump = {"measurements": m, "claims": [c.row() for c in rows]}
     if m_free is not None:
-        dump["free_edge"] = {"measurements": m_free, "claims": [c.row() for c in claims(m_free)]}
+        dump["free_edge"] = {"measurements": m_free, "claims": [c.row() for c in free_rows]}
     (out / "measurements.json").write_text(json.dumps(dump, indent=1, default=_jsonable))
     return path
 
@@ -196,8 +196,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's
     scenario (e.g. a shorter duration for a smoke test)."""
     from . import figures as F
-    from .solid.modal import all_modes
-    from .solid.modal import classify_modes
+    from .solid.modal import all_modes, classify_modes
 
     t0 = time.perf_counter()
     out = Path(out)

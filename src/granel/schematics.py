@@ -32,6 +32,8 @@ from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
+from .plots import Q8_OUTLINE  # noqa: E402
+
 MM = 1e3  # drawing unit: millimetres per metre
 
 # colours: one per medium, the solid, the boundary conditions
@@ -43,8 +45,6 @@ SWAPPED_COLOUR = "#7D3C98"
 CONTACT_COLOUR = "#D62728"
 FREE_EDGE_COLOUR = "#1F77B4"
 LAYER_COLOUR = "#E67E22"
-
-Q8_PERIMETER = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
 
 
 # ------------------------------------------------------------------ tags and look-ups
@@ -284,7 +284,7 @@ def draw_dimension(ax, a, b, panel, name, colour="k"):
 def _element_polygons(model, elements=None) -> list[np.ndarray]:
     """Q8 element outlines [mm] through corner and mid-side nodes."""
     elements = model.elements if elements is None else model.elements[elements]
-    return [model.nodes[e[Q8_PERIMETER]] * MM for e in elements]
+    return [model.nodes[e[Q8_OUTLINE]] * MM for e in elements]
 
 
 # ------------------------------------------------------------------ Fig. 1

@@ -70,7 +70,12 @@ def amplitude_spectrum(t, s, window=None, pad: int = 8) -> tuple[np.ndarray, np.
 def dominant_frequency(t, s, window=None, pad: int = 8) -> float:
     """Frequency of the largest peak of `amplitude_spectrum` (0 excluded), interpolated between
     bins [Hz]."""
-    f, S = amplitude_spectrum(t, s, window, pad)
+    return spectrum_peak(*amplitude_spectrum(t, s, window, pad))
+
+
+def spectrum_peak(f, S) -> float:
+    """Frequency of the largest peak of a spectrum (f, |S|) from `amplitude_spectrum` (0
+    excluded), interpolated between bins [Hz]."""
     if len(S) < 2 or S[1:].max() <= 0:
         return float("nan")
     k = 1 + int(np.argmax(S[1:]))
