@@ -28,8 +28,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..granular.bundles import InterfaceForces, Motion
-from ..granular.contact import friction_eigenvalue
+from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
+from ..granular.contact import friction_eigenvalue, friction_map_slope
 from ..granular.kernels import friction_rate, interface_forces, moved_beyond, rk4_substepped
 
 # step policies and statuses
@@ -163,12 +163,30 @@ def local_friction_root(muN, k_s, vt, beta, sj):
     return s
 
 
+@njit(cache=True, inline="always")
+def tangential_compliance(C, c, tx, ty):
+    """t' C_cc t: the tangential component of contact c's response C (2nc, 2nc) to its own force."""
+    return tx * (C[2 * c, 2 * c] * tx + C[2 * c, 2 * c + 1] * ty) + ty * (C[2 * c + 1, 2 * c] * tx + C[2 * c + 1, 2 * c + 1] * ty)
+
+
 @njit(cache=True)
-def _newton_update(F, C, h, iface, w, tangent, has_tangent, mu, k_s):
+def stiff_friction_root(fx, fy, tx, ty, s_prev, normal, vrel, beta, law):
+    """The force (fx, fy) with its tangential part from the exact local root (`local_friction_root`)
+    where the contact's local friction map is not contractive (its steepest slope mu k_s |N| beta
+    exceeds 1, the paper's |lambda| > 1): Newton's linear model overshoots the saturating tanh
+    there. beta: the tangential velocity's response to the tangential force; s_prev: the
+    tangential force before the Newton update."""
+    if friction_map_slope(law.mu, law.k_s, normal, 0.0, beta) <= 1.0:
+        return fx, fy
+    root = local_friction_root(law.mu * normal, law.k_s, vrel, beta, s_prev)
+    s_now = fx * tx + fy * ty
+    return fx + (root - s_now) * tx, fy + (root - s_now) * ty
+
+
+@njit(cache=True)
+def _newton_update(F, C, h, iface, w, tangent, has_tangent, law):
     """F <- F + dF with (I - J) dF = G - F, J = Du (h^2/4) C + Dw (h/2) C block-row by contact;
-    then, where the contact's local friction map is not contractive (mu k_s |N| beta > 1, the
-    paper's |lambda| > 1), the tangential force from the exact local root: Newton's linear model
-    overshoots the saturating tanh there."""
+    then the exact local root for stiff friction (`stiff_friction_root`, beta = h c_t / 2)."""
     nc = F.shape[0]
     m2 = 2 * nc
     Du, Dw, G = iface.Du, iface.Dw, iface.F
@@ -189,15 +207,8 @@ def _newton_update(F, C, h, iface, w, tangent, has_tangent, mu, k_s):
         if iface.normal[c] <= 0.0 or not has_tangent[c]:
             continue
         tx, ty = tangent[c, 0], tangent[c, 1]
-        ctt = tx * (C[2 * c, 2 * c] * tx + C[2 * c, 2 * c + 1] * ty) + ty * (C[2 * c + 1, 2 * c] * tx + C[2 * c + 1, 2 * c + 1] * ty)
-        beta = 0.5 * h * ctt
-        muN = mu * iface.normal[c]
-        if muN * k_s * beta <= 1.0:
-            continue
-        root = local_friction_root(muN, k_s, iface.vrel[c], beta, sj)
-        s_now = F[c, 0] * tx + F[c, 1] * ty
-        F[c, 0] += (root - s_now) * tx
-        F[c, 1] += (root - s_now) * ty
+        beta = 0.5 * h * tangential_compliance(C, c, tx, ty)
+        F[c, 0], F[c, 1] = stiff_friction_root(F[c, 0], F[c, 1], tx, ty, sj, iface.normal[c], iface.vrel[c], beta, law)
 
 
 @njit(cache=True)
@@ -241,7 +252,6 @@ def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
         for d in range(2):
             w.motion.u0[c, d] = pred.u[2 * c + d]
     rate = 1.5 * friction_rate(y, model, w.motion)  # stiff friction: RK4 sub-steps (forces may grow in the step)
-    law = model.law
     for it in range(1, cfg.max_iterations + 1):
         if not interface_map(y, t, h, model, pred, C, F, rate, w, cfg.newton):
             F[:, :] = w.F_start
@@ -260,7 +270,7 @@ def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
             if ok:
                 return CONVERGED, it
             continue
-        _newton_update(F, C, h, w.iface, w, frame.tangent, frame.has_tangent, law.mu, law.k_s)
+        _newton_update(F, C, h, w.iface, w, frame.tangent, frame.has_tangent, model.law)
     F[:, :] = w.F_start
     return NO_CONVERGENCE, cfg.max_iterations
 
@@ -289,11 +299,8 @@ def ensure_level(cache, solid, dt0, n):
             C[a, b] = acc
             C[b, a] = acc
     for c in range(m2 // 2):
-        if solid.frame.has_tangent[c]:
-            tx, ty = solid.frame.tangent[c, 0], solid.frame.tangent[c, 1]
-            cache.ct[n, c] = tx * (C[2 * c, 2 * c] * tx + C[2 * c, 2 * c + 1] * ty) + ty * (C[2 * c + 1, 2 * c] * tx + C[2 * c + 1, 2 * c + 1] * ty)
-        else:
-            cache.ct[n, c] = 0.0
+        has_t = solid.frame.has_tangent[c]
+        cache.ct[n, c] = tangential_compliance(C, c, solid.frame.tangent[c, 0], solid.frame.tangent[c, 1]) if has_t else 0.0
     cache.ready[n] = True
 
 
@@ -434,7 +441,5 @@ def advance_modal(st, model, ref_pos, solid, cache, cfg, target, log):
 @njit(cache=True)
 def iter_work(y, nc):
     """Scratch arrays of `interface_solve` for nc contacts and a state like y."""
-    z2 = np.zeros((nc, 2))
-    iface = InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
-    return IterWork(np.empty_like(y), np.empty((5, y.shape[0])), Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()),
-                    z2.copy(), z2.copy(), np.zeros(2 * nc), z2.copy(), np.zeros((2 * nc, 2 * nc)), np.zeros(2 * nc), iface)
+    return IterWork(np.empty_like(y), np.empty((5, y.shape[0])), motion_buffers(nc), np.zeros((nc, 2)), np.zeros((nc, 2)),
+                    np.zeros(2 * nc), np.zeros((nc, 2)), np.zeros((2 * nc, 2 * nc)), np.zeros(2 * nc), interface_buffers(nc))

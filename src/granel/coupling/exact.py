@@ -32,9 +32,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..granular.bundles import InterfaceForces, Motion
-from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, rhs, rk4_step
-from ..solid.propagation import hermite_taylor, weights_at
+from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
+from ..granular.contact import friction_map_slope
+from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, rhs, rk4_step, rk4_substepped
+from ..solid.propagation import hermite_taylor, hermite_values, weights_at
 from . import core
 
 GRID_PER_OCTAVE = 4
@@ -150,20 +151,14 @@ class Work(NamedTuple):
 
 
 @njit(cache=True)
-def _iface(nc):
-    return InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
-
-
-@njit(cache=True)
 def work_for(y, nc, nr):
-    z2 = np.zeros((nc, 2))
     m2 = 2 * nc
     z = np.zeros(m2)
     return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
-                Motion(z2.copy(), z2.copy(), z2.copy(), z2.copy()), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
-                z.copy(), z.copy(), z.copy(), z.copy(), np.zeros(2 * m2), np.zeros(2 * m2), np.zeros((2 * m2, 2 * m2)),
-                np.zeros(2 * m2), _iface(nc), _iface(nc), np.zeros(nr), np.zeros(1), np.zeros(2), np.zeros(nr), np.zeros(nr),
-                np.zeros(nc), np.zeros(nc))
+                motion_buffers(nc), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
+                np.zeros(2 * m2), np.zeros(2 * m2), np.zeros((2 * m2, 2 * m2)), np.zeros(2 * m2), interface_buffers(nc),
+                interface_buffers(nc), np.zeros(nr), np.zeros(1), np.zeros(2), np.zeros(nr), np.zeros(nr), np.zeros(nc),
+                np.zeros(nc))
 
 
 # ---------------------------------------------------------------- per-step operators
@@ -199,15 +194,14 @@ def _operators_at(solid, h, tau, hom, Cu, Cw):
         for i in range(nr):
             col[i] = wv[i, b]
         _contact_operator(P, col, Cw[b])
-    T = np.empty((4, 4))
+    T, hb, dhb = np.empty((4, 4)), np.empty(4), np.empty(4)
     hermite_taylor(h, T)
-    for b in range(4):  # H_b(tau) and H_b'(tau) from the basis' Taylor coefficients
-        hb = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
-        dhb = T[b, 1] + T[b, 2] * tau + 0.5 * T[b, 3] * tau * tau
+    hermite_values(T, tau, hb, dhb)
+    for b in range(4):
         for r in range(m2):
             for q in range(m2):
-                Cu[b, r, q] += hb * R[r, q]
-                Cw[b, r, q] += dhb * R[r, q]
+                Cu[b, r, q] += hb[b] * R[r, q]
+                Cw[b, r, q] += dhb[b] * R[r, q]
     return wd, wv
 
 
@@ -293,9 +287,8 @@ def hermite_map(st, t, h, model, cache, slot, rate, w, derivatives):
     m2 = 2 * nc
     # the granules at mid-step: RK4 over the first half under the same motion (fifth-order locally)
     w.ymid[:] = st.y
-    m = max(1, int(math.ceil(rate * 0.5 * h / 2.0)))
-    for k in range(m):
-        rk4_step(w.ymid, t + k * 0.5 * h / m, 0.5 * h / m, model, w.motion, k * 0.5 * h / m, w.rk4)
+    if rk4_substepped(w.ymid, t, 0.5 * h, model, w.motion, rate, w.rk4) < 0:
+        return False
     interface_forces(w.ytr, model, w.u1.reshape(nc, 2), w.w1.reshape(nc, 2), w.iface, derivatives)
     interface_forces(w.ymid, model, w.um.reshape(nc, 2), w.wm.reshape(nc, 2), w.iface_m, derivatives)
     for r in range(m2):
@@ -315,15 +308,15 @@ def _jacobian_rows(J, row0, Du, Dw, Cu, Cw, h, tau, inv_m, spin, tangent):
     (the spin carries the tangential part); the paper's Assumption 3 drops this where the granules
     are heavy against the solid's compliance, and it matters where friction is stiff."""
     m2 = Cu.shape[1]
+    Mi, A, Ai = np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2))
+    row2, row3 = np.empty(2), np.empty(2)
     for c in range(m2 // 2):
         # A = I - (Du tau^2 / 6 + Dw tau / 2) Minv, and its inverse
         tx, ty = tangent[c, 0], tangent[c, 1]
-        Mi = np.empty((2, 2))
         Mi[0, 0] = inv_m[c] + spin[c] * tx * tx
         Mi[0, 1] = spin[c] * tx * ty
         Mi[1, 0] = Mi[0, 1]
         Mi[1, 1] = inv_m[c] + spin[c] * ty * ty
-        A = np.empty((2, 2))
         for a in range(2):
             for b in range(2):
                 acc = 0.0
@@ -331,11 +324,8 @@ def _jacobian_rows(J, row0, Du, Dw, Cu, Cw, h, tau, inv_m, spin, tangent):
                     acc += (Du[c, a, k] * tau * tau / 6.0 + Dw[c, a, k] * 0.5 * tau) * Mi[k, b]
                 A[a, b] = (1.0 if a == b else 0.0) - acc
         det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        Ai = np.empty((2, 2))
         Ai[0, 0], Ai[0, 1], Ai[1, 0], Ai[1, 1] = A[1, 1] / det, -A[0, 1] / det, -A[1, 0] / det, A[0, 0] / det
         for q in range(m2):
-            row2 = np.empty(2)
-            row3 = np.empty(2)
             for d in range(2):
                 row2[d] = Du[c, d, 0] * Cu[2, 2 * c, q] + Du[c, d, 1] * Cu[2, 2 * c + 1, q] \
                     + Dw[c, d, 0] * Cw[2, 2 * c, q] + Dw[c, d, 1] * Cw[2, 2 * c + 1, q]
@@ -372,19 +362,10 @@ def _newton_step(w, cache, slot, h, frame, law):
             w.X[k] += dX[k]
         if w.iface.normal[c] <= 0.0 or not frame.has_tangent[c]:
             continue
-        ctt = 0.0
-        for a in range(2):
-            ta = tx if a == 0 else ty
-            for b in range(2):
-                tb = tx if b == 0 else ty
-                ctt += ta * (cache.Cw[slot, 2, 2 * c + a, 2 * c + b] + 4.0 / h * cache.Cw[slot, 3, 2 * c + a, 2 * c + b]) * tb
-        muN = law.mu * w.iface.normal[c]
-        if muN * law.k_s * ctt <= 1.0:
-            continue
-        root = core.local_friction_root(muN, law.k_s, w.iface.vrel[c], ctt, sj)
-        s_now = w.X[2 * c] * tx + w.X[2 * c + 1] * ty
-        w.X[2 * c] += (root - s_now) * tx
-        w.X[2 * c + 1] += (root - s_now) * ty
+        # the end velocity's response to F1, directly (datum 2) and through F1' (datum 3, 4/h)
+        beta = core.tangential_compliance(cache.Cw[slot, 2], c, tx, ty) + 4.0 / h * core.tangential_compliance(cache.Cw[slot, 3], c, tx, ty)
+        w.X[2 * c], w.X[2 * c + 1] = core.stiff_friction_root(w.X[2 * c], w.X[2 * c + 1], tx, ty, sj, w.iface.normal[c],
+                                                              w.iface.vrel[c], beta, law)
 
 
 @njit(cache=True)
@@ -430,6 +411,16 @@ def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
 # ---------------------------------------------------------------- error, accept, step loop
 
 
+@njit(cache=True, inline="always")
+def propagate_mode(hom, wd, wv, i, eta0, etad0, q0, qd0, q1, qd1):
+    """Mode i's displacement and velocity after a step (or at a point inside it) from its start
+    state and its modal Hermite force data (P'F0, P'F0', P'F1, P'F1'), with the weights of
+    `solid.propagation.weights_at`."""
+    eta = hom[i, 0] * eta0 + hom[i, 1] * etad0 + wd[i, 0] * q0 + wd[i, 1] * qd0 + wd[i, 2] * q1 + wd[i, 3] * qd1
+    etad = hom[i, 2] * eta0 + hom[i, 0] * etad0 + wv[i, 0] * q0 + wv[i, 1] * qd0 + wv[i, 2] * q1 + wv[i, 3] * qd1
+    return eta, etad
+
+
 @njit(cache=True)
 def trial_ledger(st, solid, cache, slot, model, w):
     """E_solid + E_granular + D - W (eq. 13) at the end of the trial step: the modes' energy from
@@ -437,15 +428,14 @@ def trial_ledger(st, solid, cache, slot, model, w):
     energy 1/2 F1' R F1, the granules' energy (11) and the ledger's accumulators."""
     m2 = st.u.shape[0]
     nr = st.eta.shape[0]
-    f1 = w.X[:m2].copy()
+    f1 = w.X[:m2]
     if nr > 0:
         w.qF1[:] = np.dot(f1, solid.P)
         w.qFd1[:] = np.dot(w.Fd1, solid.P)
     hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
     es = 0.0
     for i in range(nr):
-        e = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i] + wd[i, 0] * st.qF[i] + wd[i, 1] * st.qFd[i] + wd[i, 2] * w.qF1[i] + wd[i, 3] * w.qFd1[i]
-        v = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i] + wv[i, 0] * st.qF[i] + wv[i, 1] * st.qFd[i] + wv[i, 2] * w.qF1[i] + wv[i, 3] * w.qFd1[i]
+        e, v = propagate_mode(hom, wd, wv, i, st.eta[i], st.etad[i], st.qF[i], st.qFd[i], w.qF1[i], w.qFd1[i])
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
     for r in range(m2):
         for q in range(m2):
@@ -488,15 +478,12 @@ def accept(st, solid, cache, slot, h, w, rate, ledger):
     st.Fd0[:, :] = st.Fd
     st.qF0[:] = st.qF
     st.qFd0[:] = st.qFd
-    f1 = w.X[:m2].copy()
+    f1 = w.X[:m2]
     fd1 = w.Fd1
     qF1, qFd1 = w.qF1, w.qFd1  # from `trial_ledger`
     hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
     for i in range(nr):
-        e0 = st.eta[i]
-        v0 = st.etad[i]
-        st.eta[i] = hom[i, 0] * e0 + hom[i, 1] * v0 + wd[i, 0] * st.qF[i] + wd[i, 1] * st.qFd[i] + wd[i, 2] * qF1[i] + wd[i, 3] * qFd1[i]
-        st.etad[i] = hom[i, 2] * e0 + hom[i, 0] * v0 + wv[i, 0] * st.qF[i] + wv[i, 1] * st.qFd[i] + wv[i, 2] * qF1[i] + wv[i, 3] * qFd1[i]
+        st.eta[i], st.etad[i] = propagate_mode(hom, wd, wv, i, st.eta[i], st.etad[i], st.qF[i], st.qFd[i], qF1[i], qFd1[i])
         st.qF[i] = qF1[i]
         st.qFd[i] = qFd1[i]
     for r in range(m2):
@@ -528,11 +515,8 @@ def friction_slopes(st, law, cache, slot, frame, lam):
         if not frame.has_tangent[c]:
             lam[c] = 0.0
             continue
-        tx, ty = frame.tangent[c, 0], frame.tangent[c, 1]
-        ctt = tx * (cache.Cw[slot, 2, 2 * c, 2 * c] * tx + cache.Cw[slot, 2, 2 * c, 2 * c + 1] * ty) \
-            + ty * (cache.Cw[slot, 2, 2 * c + 1, 2 * c] * tx + cache.Cw[slot, 2, 2 * c + 1, 2 * c + 1] * ty)
-        th = math.tanh(law.k_s * st.vrel[c])
-        lam[c] = law.mu * law.k_s * st.normal[c] * ctt * (1.0 - th * th)
+        ctt = core.tangential_compliance(cache.Cw[slot, 2], c, frame.tangent[c, 0], frame.tangent[c, 1])
+        lam[c] = friction_map_slope(law.mu, law.k_s, st.normal[c], st.vrel[c], ctt)
 
 
 @njit(cache=True)
@@ -638,23 +622,15 @@ def dense_state(st, solid, model, t_out, yo, eta_o, etad_o, F_o):
         return
     yo[:] = st.y0
     if tau > 0.0:
-        m = max(1, int(math.ceil(st.clock[3] * tau / 2.0)))
-        s_ = tau / m
-        work = np.empty((5, yo.shape[0]))
-        for k in range(m):
-            rk4_step(yo, t0 + k * s_, s_, model, st.step_motion, k * s_, work)
-    s = tau / h
-    h00 = (1 + 2 * s) * (1 - s) ** 2
-    h10 = s * (1 - s) ** 2 * h
-    h01 = s * s * (3 - 2 * s)
-    h11 = s * s * (s - 1) * h
+        rk4_substepped(yo, t0, tau, model, st.step_motion, st.clock[3], np.empty((5, yo.shape[0])))
+    T, H, dH = np.empty((4, 4)), np.empty(4), np.empty(4)
+    hermite_taylor(h, T)
+    hermite_values(T, tau, H, dH)
     for c in range(st.F.shape[0]):
         for d in range(2):
-            F_o[c, d] = h00 * st.F0[c, d] + h10 * st.Fd0[c, d] + h01 * st.F[c, d] + h11 * st.Fd[c, d]
+            F_o[c, d] = H[0] * st.F0[c, d] + H[1] * st.Fd0[c, d] + H[2] * st.F[c, d] + H[3] * st.Fd[c, d]
     nr = st.eta.shape[0]
     hom, wd, wv, wa = np.empty((nr, 3)), np.empty((nr, 4)), np.empty((nr, 4)), np.empty((nr, 4))
     weights_at(solid.omega, h, tau, hom, wd, wv, wa)
     for i in range(nr):
-        e0, v0 = st.eta0[i], st.etad0[i]
-        eta_o[i] = hom[i, 0] * e0 + hom[i, 1] * v0 + wd[i, 0] * st.qF0[i] + wd[i, 1] * st.qFd0[i] + wd[i, 2] * st.qF[i] + wd[i, 3] * st.qFd[i]
-        etad_o[i] = hom[i, 2] * e0 + hom[i, 0] * v0 + wv[i, 0] * st.qF0[i] + wv[i, 1] * st.qFd0[i] + wv[i, 2] * st.qF[i] + wv[i, 3] * st.qFd[i]
+        eta_o[i], etad_o[i] = propagate_mode(hom, wd, wv, i, st.eta0[i], st.etad0[i], st.qF0[i], st.qFd0[i], st.qF[i], st.qFd[i])

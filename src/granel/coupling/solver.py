@@ -57,6 +57,12 @@ class SolverError(RuntimeError):
     """The coupled step failed (no convergence, or a non-finite state); the message says where and why."""
 
 
+def step_log(nc: int) -> core.StepLog:
+    """An empty per-step log of LOG_CAPACITY steps for nc contacts (the compiled loops fill it)."""
+    return core.StepLog(np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY, np.int64),
+                        np.zeros((LOG_CAPACITY, nc)))
+
+
 def contact_frame(system: GranularSystem, model: SolidModel) -> core.ContactFrame:
     tangents = np.array([[-c.normal[1], c.normal[0]] for c in system.solid_contacts], float).reshape(-1, 2)
     has_t = np.array([c.dof_y >= 0 for c in model.contacts], bool)
@@ -88,8 +94,7 @@ class ModalSolver:
                                     np.zeros((H + 1, nc)))
         self.cfg = settings.config(self.stepper.max_disp)
         self.per_ticks = outputs_every * 2**H  # ticks between outputs
-        self.log = core.StepLog(np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY, np.int64),
-                                np.zeros((LOG_CAPACITY, nc)))
+        self.log = step_log(nc)
 
     @property
     def name(self) -> str:
@@ -129,8 +134,7 @@ class ModalSolver:
             if status == core.DONE:
                 return
             if status == core.REBUILD:
-                self.stepper.refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
-                self.stepper.rebuilds += 1
+                self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
             elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
                 raise SolverError(self._diagnosis(status))
 
@@ -226,8 +230,7 @@ class ExactSolver:
                                      1e-3 * float(settings.abstol), 1e-3 * float(settings.reltol),
                                      int(settings.max_iterations), float(self.stepper.max_disp))
         self.kinks = np.array(sorted(k for k in kinks if np.isfinite(k) and k > 0), float)
-        self.log = core.StepLog(np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY), np.zeros(LOG_CAPACITY, np.int64),
-                                np.zeros((LOG_CAPACITY, nc)))
+        self.log = step_log(nc)
         self.t_out = 0.0
 
     @property
@@ -238,7 +241,7 @@ class ExactSolver:
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y = self.y0.copy()
         dy = np.zeros_like(y)
-        rhs(0.0, y, dy, self.stepper.model, self.stepper._still, 0.0)
+        rhs(0.0, y, dy, self.stepper.model, self.stepper.still, 0.0)
         z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
@@ -275,13 +278,12 @@ class ExactSolver:
         target = k * self.schedule.per * self.settings.dt
         st = self.st
         while st.clock[0] < target * (1 - 1e-12):
-            status, m = exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache,
-                                                  self.cfg, target, self.kinks, self.log)
+            status, m = exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache, self.cfg,
+                                            target, self.kinks, self.log)
             if m:
                 trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
             if status == core.REBUILD:
-                self.stepper.refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
-                self.stepper.rebuilds += 1
+                self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
             elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
                 what = "the granular state became non-finite" if status == core.NON_FINITE else \
                     "Newton on the interface forces and slopes did not converge"

@@ -57,7 +57,7 @@ class SparseSolver:
             Z = self.newmark.factor(h).solve(self.Bt.toarray())
             C = np.ascontiguousarray(self.B @ Z)
             t = self.frame.tangent
-            ct = np.array([t[k] @ C[2 * k:2 * k + 2, 2 * k:2 * k + 2] @ t[k] if self.frame.has_tangent[k] else 0.0
+            ct = np.array([core.tangential_compliance(C, k, t[k, 0], t[k, 1]) if self.frame.has_tangent[k] else 0.0
                            for k in range(len(t))])
             ops = self._ops[level] = StepOperators(h, Z, C, ct)
         return ops
@@ -103,10 +103,11 @@ class SparseSolver:
         target = k * self.per_ticks
         lam = np.zeros(len(self.frame.tangent))
         cache = self._cache(H + 1 if s.method == "paper" else 1)
+        no_modes = core.ModalSolid(np.zeros(0), np.zeros((0, 0)), self.frame)  # the policy reads only the frame and cache
         while st.ticks[0] < target:
             if not cache.ready[st.ticks[2]]:
                 cache = self._cache(int(st.ticks[2]) + 1)
-            level = core.step_level(st, self.stepper.model.law, cache, core.ModalSolid(np.zeros(0), np.zeros((0, 0)), self.frame), self.cfg, target - st.ticks[0], lam)
+            level = core.step_level(st, self.stepper.model.law, cache, no_modes, self.cfg, target - st.ticks[0], lam)
             if level < 0:
                 raise SolverError(f"t = {self.t:.6e} s: (B1) needs more than {H} halvings of {s.dt:.3e} s")
             ops = self.operators(level)

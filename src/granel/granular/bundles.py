@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
 
@@ -119,5 +120,13 @@ class InterfaceForces(NamedTuple):
     Dw: np.ndarray  # (nc, 2, 2)
 
 
-def interface_buffers(nc: int) -> InterfaceForces:
+@njit(cache=True)
+def interface_buffers(nc):
+    """Zeroed `InterfaceForces` for nc contact points (callable from compiled code)."""
     return InterfaceForces(np.zeros((nc, 2)), np.zeros(nc), np.zeros(nc), np.zeros((nc, 2, 2)), np.zeros((nc, 2, 2)))
+
+
+@njit(cache=True)
+def motion_buffers(nc):
+    """A zeroed `Motion` of nc contact points, each coefficient its own array (scratch)."""
+    return Motion(np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)))

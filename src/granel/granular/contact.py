@@ -59,8 +59,18 @@ def contact_law_derivatives(A, G, delta, ddelta, vt, mu, k_s):
 
 
 @njit(cache=True, inline="always")
+def friction_map_slope(mu, k_s, normal, vt, beta):
+    """The slope of a contact's friction force against itself over a step, mu k_s |N| beta /
+    cosh^2(k_s vt) (eq. 5 differentiated), where beta is the relative tangential velocity's
+    response to the contact's own tangential force: the map F_t -> F_t is a contraction where
+    this is below 1."""
+    th = math.tanh(k_s * vt)
+    return mu * k_s * abs(normal) * beta * (1.0 - th * th)
+
+
+@njit(cache=True, inline="always")
 def friction_eigenvalue(mu, k_s, normal, vt, h, c_t):
     """(10)/(A9): |lambda| = 1/2 mu k_s |N| h c_t / cosh^2(k_s vt), with c_t = T (M + K h^2/4)^-1 T'
-    the tangential compliance of the contact point over a step h."""
-    th = math.tanh(k_s * vt)
-    return 0.5 * mu * k_s * abs(normal) * h * c_t * (1.0 - th * th)
+    the tangential compliance of the contact point over a step h (beta = h c_t / 2 under the
+    constant average acceleration)."""
+    return friction_map_slope(mu, k_s, normal, vt, 0.5 * h * c_t)

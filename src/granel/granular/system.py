@@ -308,7 +308,7 @@ class Stepper:
         self.substep = substep  # split steps into RK4 sub-steps where the friction is stiff (large k_s)
         self.rebuilds = 0
         self.refresh(system.pos0 if pos is None else pos)
-        self._still = still(len(system.solid_contacts))
+        self.still = still(len(system.solid_contacts))  # the contact points at rest
 
     def refresh(self, pos) -> None:
         """New candidate contacts around `pos`."""
@@ -319,10 +319,14 @@ class Stepper:
     def maybe_refresh(self, pos) -> bool:
         """Rebuild the neighbour list if a granule moved (nearly) half a skin from its reference."""
         if np.max(np.abs(pos - self.nl.ref_pos), initial=0.0) >= 0.5 * self.system.skin / np.sqrt(2.0):
-            self.refresh(pos)
-            self.rebuilds += 1
+            self.rebuild(pos)
             return True
         return False
+
+    def rebuild(self, pos) -> None:
+        """A new neighbour list around `pos`, counted (a granule moved far)."""
+        self.refresh(pos)
+        self.rebuilds += 1
 
     @property
     def max_disp(self) -> float:
@@ -331,7 +335,7 @@ class Stepper:
     def advance(self, state: GranularState, dt: float, nsteps: int, motion: Motion | None = None) -> GranularState:
         """Advance `state` in place by nsteps RK4 steps; the solid contact points follow `motion`
         within each step (still for a rigid solid)."""
-        motion = self._still if motion is None else motion
+        motion = self.still if motion is None else motion
         done = 0
         while done < nsteps:
             k = kernels.rk4_advance(state.y, state.t, dt, nsteps - done, self.model, motion, self.nl.ref_pos,
@@ -349,7 +353,7 @@ class Stepper:
 
     def energies(self, state: GranularState, su=None):
         """(kinetic, rotational, potential) per granule, eq. (11); solid points displaced by su."""
-        su = self._still.u0 if su is None else su
+        su = self.still.u0 if su is None else su
         return kernels.granule_energies(state.y, self.model, su)
 
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:
@@ -362,6 +366,6 @@ class Stepper:
         state and the points' displacement su and velocity sv (`bundles.InterfaceForces`)."""
         nc = len(self.system.solid_contacts)
         out = interface_buffers(nc)
-        kernels.interface_forces(state.y, self.model, self._still.u0 if su is None else su,
-                                 self._still.u0 if sv is None else sv, out)
+        kernels.interface_forces(state.y, self.model, self.still.u0 if su is None else su,
+                                 self.still.u0 if sv is None else sv, out)
         return out

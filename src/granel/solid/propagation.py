@@ -64,6 +64,15 @@ def hermite_taylor(h, out):
 
 
 @njit(cache=True)
+def hermite_values(T, tau, H, dH):
+    """The four cubic Hermite basis functions H_b(tau) and their slopes H_b'(tau), from their
+    Taylor rows T (`hermite_taylor`)."""
+    for b in range(4):
+        H[b] = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
+        dH[b] = T[b, 1] + T[b, 2] * tau + 0.5 * T[b, 3] * tau * tau
+
+
+@njit(cache=True)
 def weights_at(omega, h, tau, hom, wd, wv, wa):
     """Modal weights at tau in a step of size h (the Hermite basis lives on [0, h]): the free
     response hom (S0, tau S1, -w^2 tau S1) at w tau and, per Hermite datum b, the displacement
@@ -75,9 +84,8 @@ def weights_at(omega, h, tau, hom, wd, wv, wa):
     tp[0] = 1.0
     for p in range(1, 6):
         tp[p] = tp[p - 1] * tau
-    basis_at = np.empty(4)  # H_b(tau)
-    for b in range(4):
-        basis_at[b] = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
+    basis_at, slope_at = np.empty(4), np.empty(4)  # H_b(tau), H_b'(tau)
+    hermite_values(T, tau, basis_at, slope_at)
     for i in range(omega.shape[0]):
         w = omega[i]
         oscillator_functions(w * tau, S)
