@@ -30,6 +30,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .analysis.density import granule_energies, granule_states  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
 
 # the paper's magnification of the deformation movies (Appendix C)
@@ -89,38 +90,6 @@ def solid_states(ds, times: np.ndarray, modes=None) -> tuple[np.ndarray, np.ndar
     if modes is None and "solid_eta" in ds:
         modes = _modes_of(ds, model)
     return reduced_states(ds, times, model, modes)
-
-
-def granule_states(ds, idx: np.ndarray) -> np.ndarray:
-    """The granular state vectors y (see granular.kernels) at output indices idx: (len(idx), 6n+3)."""
-    x, y = ds["x"].values[idx], ds["y"].values[idx]
-    n = x.shape[1]
-    Y = np.zeros((len(idx), 6 * n + 3))
-    Y[:, 0 : 2 * n : 2] = x
-    Y[:, 1 : 2 * n : 2] = y
-    Y[:, 2 * n : 3 * n] = ds["theta"].values[idx]
-    Y[:, 3 * n : 5 * n : 2] = ds["v_x"].values[idx]
-    Y[:, 3 * n + 1 : 5 * n : 2] = ds["v_y"].values[idx]
-    Y[:, 5 * n : 6 * n] = ds["omega"].values[idx]
-    return Y
-
-
-def granule_energies(system, Y: np.ndarray, SU: np.ndarray | None = None) -> np.ndarray:
-    """Per-granule energy (kinetic + rotational + contact-potential share, eq. 11) for each state
-    row of Y, with contact points displaced by SU[f] (nc, 2). One Stepper serves all frames; its
-    neighbour list is rebuilt (`Stepper.maybe_refresh`) only when a granule has moved by half the
-    skin since the last build, so it always holds every touching pair, in the order a fresh list
-    would (figures.granule_energies_at is this for one frame)."""
-    from .granular.system import GranularState, Stepper
-
-    n = system.n
-    st = Stepper(system)
-    out = np.empty((len(Y), n))
-    for f, y in enumerate(Y):
-        st.maybe_refresh(y[: 2 * n].reshape(-1, 2))
-        kin, rot, pot = st.energies(GranularState(y, 0.0), None if SU is None else SU[f])
-        out[f] = kin + rot + pot
-    return out
 
 
 @dataclass

@@ -164,8 +164,8 @@ def _fig4_inset(ax, runs, color, tmax=0.2):
 
 def granule_energies_at(ds, k: int, su=None):
     """Per-granule energy (kinetic + rotational + contact share) at output index k, with the
-    solid contact points displaced by su (nc, 2): `animate.granule_energies` for one frame."""
-    from .animate import granule_energies, granule_states
+    solid contact points displaced by su (nc, 2): `analysis.density.granule_energies` for one frame."""
+    from .analysis.density import granule_energies, granule_states
 
     system = model_of(ds)[1]
     return granule_energies(system, granule_states(ds, [k]), None if su is None else su[None])[0], system

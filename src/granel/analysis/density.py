@@ -46,3 +46,35 @@ def beam_energy_density_grid(model, q, v, nx: int = 21) -> tuple[np.ndarray, np.
     shape = 12.0 * s**2  # the mean of 12 s^2 over s in [-1/2, 1/2] is 1
     w = (kin / vol)[:, None] + (pot / vol)[:, None] * shape[None, :]
     return model.nodes[0, 0] + s * depth, model.nodes[:, 1], w
+
+
+def granule_states(ds, idx: np.ndarray) -> np.ndarray:
+    """The granular state vectors y (see granular.kernels) at output indices idx: (len(idx), 6n+3)."""
+    x, y = ds["x"].values[idx], ds["y"].values[idx]
+    n = x.shape[1]
+    Y = np.zeros((len(idx), 6 * n + 3))
+    Y[:, 0 : 2 * n : 2] = x
+    Y[:, 1 : 2 * n : 2] = y
+    Y[:, 2 * n : 3 * n] = ds["theta"].values[idx]
+    Y[:, 3 * n : 5 * n : 2] = ds["v_x"].values[idx]
+    Y[:, 3 * n + 1 : 5 * n : 2] = ds["v_y"].values[idx]
+    Y[:, 5 * n : 6 * n] = ds["omega"].values[idx]
+    return Y
+
+
+def granule_energies(system, Y: np.ndarray, SU: np.ndarray | None = None) -> np.ndarray:
+    """Per-granule energy (kinetic + rotational + contact-potential share, eq. 11) for each state
+    row of Y, with contact points displaced by SU[f] (nc, 2). One Stepper serves all frames; its
+    neighbour list is rebuilt (`Stepper.maybe_refresh`) only when a granule has moved by half the
+    skin since the last build, so it always holds every touching pair, in the order a fresh list
+    would (`figures.granule_energies_at` is this for one frame)."""
+    from ..granular.system import GranularState, Stepper
+
+    n = system.n
+    st = Stepper(system)
+    out = np.empty((len(Y), n))
+    for f, y in enumerate(Y):
+        st.maybe_refresh(y[: 2 * n].reshape(-1, 2))
+        kin, rot, pot = st.energies(GranularState(y, 0.0), None if SU is None else SU[f])
+        out[f] = kin + rot + pot
+    return out
