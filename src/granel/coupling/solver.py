@@ -21,6 +21,7 @@ from ..granular.bundles import Motion
 from ..granular.kernels import rhs
 from ..granular.system import GranularSystem, GranularState, Stepper
 from ..solid.base import SolidModel
+from ..solid.modal import at_dofs
 from . import core, exact
 
 METHODS = ("fast", "paper")
@@ -83,7 +84,7 @@ class ModalSolver:
         nc = len(system.solid_contacts)
         frame = contact_frame(system, model)
         if model.ndof:
-            P = np.ascontiguousarray(model.contact_map() @ modes.shapes)
+            P = at_dofs(model.contact_map(), modes.shapes)
             w2 = modes.omega**2
         else:
             P, w2 = np.zeros((2 * nc, 0)), np.zeros(0)
@@ -204,11 +205,11 @@ class ExactSolver:
         if model.ndof:
             keep = modes.omega <= 2 * np.pi * settings.mode_cutoff
             B = model.contact_map()
-            P = np.ascontiguousarray(B @ modes.shapes[:, keep])
+            P = at_dofs(B, modes.shapes, keep)
             omega = modes.omega[keep]
             static = residual_compliance(model, B, P, omega)
             # the dropped modes follow the force statically: eta_i = (P_i' F) / w_i^2
-            self.P_drop = np.ascontiguousarray(B @ modes.shapes[:, ~keep])
+            self.P_drop = at_dofs(B, modes.shapes, ~keep)
             self.omega_drop = modes.omega[~keep]
         else:
             P, omega, static = np.zeros((2 * nc, 0)), np.zeros(0), np.zeros((2 * nc, 2 * nc))

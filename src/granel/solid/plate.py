@@ -13,8 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import Basis, BilinearForm, ElementQuadS2, ElementVector, Functional, MeshQuad
-from skfem.helpers import ddot, dot, sym_grad
 
 from .base import ContactPoint, SolidModel
 
@@ -115,10 +113,15 @@ def plate_mesh(x0, y0, width, length, left_layers, right_layers, nx=8, growth=1.
     for i in range(nx):
         for j in range(ny):
             t.append([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)])
+    from skfem import MeshQuad  # scikit-fem is imported only where a plate is built
+
     return MeshQuad(p, np.array(t, dtype=np.int64).T)
 
 
 def plane_stress_forms(E, nu, rho, h):
+    from skfem import BilinearForm, Functional
+    from skfem.helpers import ddot, dot, sym_grad
+
     lam = E * nu / (1 - nu**2)  # plane-stress Lame parameter: gives D of eq. (7)
     mu = E / (2 * (1 + nu))
 
@@ -174,6 +177,8 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
     left = [(l.y, l.length / 2) for l in layers if l.edge == "left"]
     right = [(l.y, l.length / 2) for l in layers if l.edge == "right"]
     mesh = plate_mesh(x0, y0, width, length, left, right, nx, mesh.growth, mesh.max_size, mesh.x_growth)
+    from skfem import Basis, ElementQuadS2, ElementVector, Functional
+
     basis = Basis(mesh, ElementVector(ElementQuadS2()), intorder=4)
     Kf, Mf, strain_energy, kinetic_energy = plane_stress_forms(E, nu, rho, thickness)
     K = Kf.assemble(basis).tocsr()
