@@ -34,7 +34,7 @@ from ..granular.kernels import friction_rate, interface_forces, moved_beyond, rk
 
 # step policies and statuses
 POLICY_CONSTANT, POLICY_B1 = 0, 1
-DONE, REBUILD, LOG_FULL, NO_CONVERGENCE, NON_FINITE = 0, 1, 2, 3, 4
+DONE, REBUILD, LOG_FULL, NO_CONVERGENCE, NON_FINITE, BALANCE_LOST = 0, 1, 2, 3, 4, 5
 CONVERGED = 0
 
 

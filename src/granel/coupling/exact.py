@@ -79,6 +79,7 @@ class ExactConfig(NamedTuple):
     v_ref: float  # velocity scale of the error norm [m/s]
     e_ref: float  # energy scale of the error norm [J]
     ledger_tol: float  # the energy ledger (13) may drift by ledger_tol e_ref over `duration`
+    ledger_limit: float  # [J] a drift beyond this stops the run (the control has failed)
     duration: float
     newton: bool
     abstol: float
@@ -92,7 +93,7 @@ class ExactState(NamedTuple):
     their modal projections qF = P'F, qFd = P'Fd, the contacts' displacement u and velocity w,
     |N|, v_t, the granules' derivative dy) and, for dense output, the same at
     the previous step's start (suffix 0). clock = [t, t0, err_prev, friction rate of the last
-    step, energy ledger (13)]; meta = [level, rejected]."""
+    step, energy ledger (13), its initial value]; meta = [level, rejected]."""
 
     y: np.ndarray
     dy: np.ndarray
@@ -556,8 +557,8 @@ def next_level(level, err, err_prev, cfg):
 @njit(cache=True)
 def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
     """Accepted steps until the clock passes t_target (dense output covers the output itself).
-    Returns (status, steps logged): core.DONE, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE
-    or core.NON_FINITE."""
+    Returns (status, steps logged): core.DONE, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE,
+    core.NON_FINITE or core.BALANCE_LOST (the ledger (13) drifted beyond cfg.ledger_limit)."""
     nc = st.F.shape[0]
     n = model.granules.radius.shape[0]
     w = work_for(st.y, nc, st.eta.shape[0])
@@ -591,6 +592,8 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
             st.meta[0] = max(level + 1, next_level(level, err, 1.0, cfg))
             st.meta[1] += 1
             continue
+        if abs(ledger - st.clock[5]) > cfg.ledger_limit:
+            return core.BALANCE_LOST, k  # even the smallest step lost the energy balance (13)
         accept(st, solid, cache, slot, h, w, w.rate[0], ledger)
         friction_slopes(st, model.law, cache, slot, solid.frame, lam)
         log.t[k] = st.clock[0]

@@ -54,6 +54,10 @@ class SolverSettings:
                                   int(self.max_iterations), not paper, float(max_disp))
 
 
+# the exact integrator stops when the energy ledger (13) has drifted by this share of the input
+BALANCE_LIMIT = 1e-2
+
+
 class SolverError(RuntimeError):
     """The coupled step failed (no convergence, or a non-finite state); the message says where and why."""
 
@@ -136,6 +140,11 @@ class ModalSolver:
                 return
             if status == core.REBUILD:
                 self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
+            elif status == core.BALANCE_LOST:
+                raise SolverError(f"t = {st.clock[0]:.6e} s: the energy balance (13) drifted by more than {BALANCE_LIMIT:g} "
+                                  f"of the input energy with the error control at its smallest step "
+                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s): the results would be wrong. "
+                                  "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
             elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
                 raise SolverError(self._diagnosis(status))
 
@@ -227,7 +236,8 @@ class ExactSolver:
         # the interface forces converge 1000 times tighter than (A4)'s tolerances: the energy-ledger
         # control would otherwise chase the iteration's own floor down to tiny steps
         self.cfg = exact.ExactConfig(float(h_max), int(levels), not fixed, float(settings.rtol), float(settings.atol),
-                                     float(v_ref), float(e_ref), float(settings.ledger_tol), float(schedule.duration), True,
+                                     float(v_ref), float(e_ref), float(settings.ledger_tol),
+                                     BALANCE_LIMIT * float(e_ref), float(schedule.duration), True,
                                      1e-3 * float(settings.abstol), 1e-3 * float(settings.reltol),
                                      int(settings.max_iterations), float(self.stepper.max_disp))
         self.kinks = np.array(sorted(k for k in kinks if np.isfinite(k) and k > 0), float)
@@ -247,7 +257,7 @@ class ExactSolver:
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
                                    y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr), Motion(zc(), zc(), zc(), zc()),
-                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y)]),
+                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y), self._ledger(y)]),
                                    np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
         self.t_out = 0.0
 
@@ -285,6 +295,11 @@ class ExactSolver:
                 trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
             if status == core.REBUILD:
                 self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
+            elif status == core.BALANCE_LOST:
+                raise SolverError(f"t = {st.clock[0]:.6e} s: the energy balance (13) drifted by more than {BALANCE_LIMIT:g} "
+                                  f"of the input energy with the error control at its smallest step "
+                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s): the results would be wrong. "
+                                  "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
             elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
                 what = "the granular state became non-finite" if status == core.NON_FINITE else \
                     "Newton on the interface forces and slopes did not converge"
