@@ -154,15 +154,42 @@ def medium_from_table(name: str, rows: list[dict], material: Material, side: str
 
 
 def read_granules_csv(path) -> list[dict]:
-    """Read `label,x,y,radius[,material]` rows (header required)."""
+    """Read `label,x,y,radius[,material]` rows (header required). Every value is checked: a
+    non-empty label, unique in the file, finite x and y, a finite positive radius; the error
+    names the file, the line and the column."""
     import csv
 
+    rows, seen = [], {}
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        need = {"label", "x", "y", "radius"}
-        if reader.fieldnames is None or not need.issubset(reader.fieldnames):
-            raise ValueError(f"{path}: header must contain {sorted(need)}, got {reader.fieldnames}")
-        return [dict(r) for r in reader]
+        need = ("label", "x", "y", "radius")
+        if reader.fieldnames is None or not set(need).issubset(reader.fieldnames):
+            raise ValueError(f"{path}: header must contain {list(need)}, got {reader.fieldnames}")
+        for r in reader:
+            line = reader.line_num
+            where = f"{path}, line {line}"
+            if None in r or any(r.get(k) is None for k in need):
+                raise ValueError(f"{where}: expected {len(reader.fieldnames)} columns ({','.join(reader.fieldnames)})")
+            label = r["label"].strip()
+            if not label:
+                raise ValueError(f"{where}: empty label")
+            if label in seen:
+                raise ValueError(f"{where}: label {label!r} repeats line {seen[label]}")
+            seen[label] = line
+            row = {"label": label, "material": (r.get("material") or "").strip()}
+            for k in ("x", "y", "radius"):
+                try:
+                    row[k] = float(r[k])
+                except ValueError:
+                    raise ValueError(f"{where}: {k} = {r[k]!r} is not a number") from None
+                if not math.isfinite(row[k]):
+                    raise ValueError(f"{where}: {k} = {r[k]!r} is not finite")
+            if row["radius"] <= 0:
+                raise ValueError(f"{where}: radius = {r['radius']!r} must be positive")
+            rows.append(row)
+    if not rows:
+        raise ValueError(f"{path}: no granules")
+    return rows
 
 
 def hexagonal_block(nx: int, ny: int, radius: float, origin=(0.0, 0.0)) -> np.ndarray:

@@ -18,8 +18,13 @@ def _format_validation_error(err: ValidationError) -> str:
     for e in err.errors():
         loc = ".".join(str(p) for p in e["loc"]) or "(scenario)"
         msg = e["msg"]
+        if msg.startswith("Value error, @"):  # a field's type misfit found by the model (schema._Strict)
+            _, key, shown, why = msg.split("@", 3)
+            lines.append(f"{loc}.{key} = {shown}: {why}" if loc != "(scenario)" else f"{key} = {shown}: {why}")
+            continue
         if e["type"] == "extra_forbidden":
             msg = "unknown field"
+        msg = msg.removeprefix("Value error, ")
         inp = e.get("input")
         shown = repr(inp) if not isinstance(inp, dict) else "{...}"
         if len(shown) > 80:
@@ -64,14 +69,18 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         key, val = item.split("=", 1)
         parts = key.strip().split(".")
         node = raw
-        for p in parts[:-1]:
+        for k, p in enumerate(parts[:-1]):
             if isinstance(node, list):
                 try:
                     node = node[int(p)]
                 except (ValueError, IndexError):
                     raise ScenarioError(f"override {key!r}: no list item {p!r}") from None
-            else:
+            elif isinstance(node, dict):
                 node = node.setdefault(p, {})
+            else:
+                raise ScenarioError(f"override {key!r}: {'.'.join(parts[:k])} is a value, not a table")
+        if not isinstance(node, (dict, list)):
+            raise ScenarioError(f"override {key!r}: {'.'.join(parts[:-1])} is a value, not a table")
         last = parts[-1]
         if isinstance(node, list):
             try:

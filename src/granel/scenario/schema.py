@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal, Union, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
+from pydantic.fields import FieldInfo
 
 from ..excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, constant_force, half_sine, harmonic_burst, read_force_csv
 from ..materials import Material
@@ -25,8 +26,46 @@ def _time(v):
         raise ValueError(str(e)) from None
 
 
+def _leaf_types(annotation) -> set:
+    """The plain types a field's annotation is built from (through unions, containers and
+    Annotated metadata)."""
+    args = get_args(annotation)
+    if not args:
+        return {annotation}
+    return set().union(*(_leaf_types(a) for a in args if not isinstance(a, FieldInfo)))
+
+
+def _misfit(value, leaves: set) -> str | None:
+    """Why `value` does not fit a field made of `leaves` where pydantic would convert it: a
+    boolean read as a number, or a number or string read as a boolean."""
+    items = value if isinstance(value, (list, tuple)) else [value]
+    if bool in leaves:
+        if leaves <= {bool, type(None)} and any(not isinstance(v, bool) for v in items):
+            return "a boolean (true or false) is expected"
+        return None
+    if any(isinstance(v, bool) for v in items) and leaves & {float, int}:
+        return "a boolean where a number is expected"
+    return None
+
+
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    """Unknown fields are errors, every float must be finite (no nan, no inf), a boolean is never
+    read as a number (pydantic would take true as 1) and a number never as a boolean."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_type_conversions(cls, data):
+        if not isinstance(data, dict):
+            return data
+        for key, value in data.items():
+            field = cls.model_fields.get(key)
+            why = None if field is None else _misfit(value, _leaf_types(field.annotation))
+            if why:
+                # the formatter moves the field name into the location (`files.format_validation_error`)
+                raise ValueError(f"@{key}@{value!r}@{why}")
+        return data
 
 
 class SimulationSpec(_Strict):
@@ -112,6 +151,19 @@ class MediumSpec(_Strict):
     outer_wall: bool = False
     gap: float = Field(0.0, ge=0)
     granules_file: str | None = None
+
+    @field_validator("labels")
+    @classmethod
+    def _unique_labels(cls, v):
+        if isinstance(v, list):
+            seen = set()
+            for k, lab in enumerate(v):
+                if not lab.strip():
+                    raise ValueError(f"labels.{k} is empty")
+                if lab in seen:
+                    raise ValueError(f"labels.{k} = {lab!r} repeats an earlier label: labels must be unique in a medium")
+                seen.add(lab)
+        return v
 
     @model_validator(mode="after")
     def _shape(self):
