@@ -61,6 +61,77 @@ def _check_field(field: str) -> None:
         raise ValueError(f"field must be 'deformation' or 'energy-density', got {field!r}")
 
 
+def check_movie_options(max_frames=120, fps=20, magnification=None) -> None:
+    """ValueError naming the option for a frame count or frame rate that is not a whole number
+    >= 1, or a magnification that is not a finite number > 0."""
+    for name, v in (("frames", max_frames), ("fps", fps)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be a whole number >= 1, got {v!r}")
+    if magnification is not None:
+        try:
+            m = float(magnification)
+        except (TypeError, ValueError):
+            m = float("nan")
+        if not (np.isfinite(m) and m > 0):
+            raise ValueError(f"magnification must be a finite number > 0, got {magnification!r}")
+
+
+class ResultFileError(ValueError):
+    """A file that cannot be read as a granel result: unreadable, truncated, not NetCDF, or a
+    NetCDF file of something else. The message names the file."""
+
+
+# what a movie reads from a result (besides the scenario text in its attributes)
+RESULT_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
+
+
+def read_result(path) -> "xr.Dataset":
+    """A run's result file, read and checked against the scenario it carries: raises
+    ResultFileError (naming the file) for a directory, an unreadable, truncated or non-NetCDF
+    file, a NetCDF file without a granel scenario and the per-granule variables, or one whose
+    granules are not those of its scenario."""
+    from .results import read_netcdf
+
+    path = Path(path)
+    if path.is_dir():
+        raise ResultFileError(f"{path}: a directory, not a result file")
+    try:
+        ds = read_netcdf(path)
+    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
+        raise ResultFileError(f"{path}: cannot be read as NetCDF ({_first_line(e)})") from None
+    check_result(ds, path)
+    return ds
+
+
+def check_result(ds, name="result") -> None:
+    """ResultFileError unless `ds` looks like a granel result that a movie can be drawn from."""
+    text = ds.attrs.get("scenario")
+    if not isinstance(text, str):
+        raise ResultFileError(f"{name}: not a granel result (no scenario attribute)")
+    missing = [v for v in RESULT_VARIABLES if v not in ds.variables]
+    if missing:
+        raise ResultFileError(f"{name}: not a granel result (no {', '.join(missing)})")
+    if "time" not in ds.dims or "granule" not in ds.dims or ds.sizes["time"] < 1:
+        raise ResultFileError(f"{name}: not a granel result (no time and granule dimensions, or no output)")
+    for v in RESULT_VARIABLES:
+        if ds[v].dims != ("time", "granule"):
+            raise ResultFileError(f"{name}: damaged result ({v} has dimensions {ds[v].dims})")
+    from .figures import model_of
+
+    try:
+        _, system, _ = model_of(ds)
+    except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
+        raise ResultFileError(f"{name}: its scenario attribute is not a valid granel scenario ({_first_line(e)})") from None
+    labels = [str(g) for g in ds["granule"].values]
+    if labels != list(system.labels):
+        raise ResultFileError(f"{name}: damaged result ({len(labels)} granules stored, its scenario has {system.n})")
+
+
+def _first_line(e: Exception) -> str:
+    lines = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {lines[0]}" if lines else type(e).__name__
+
+
 # --------------------------------------------------------------------------------------------
 # 1. what every frame shows
 
@@ -389,7 +460,10 @@ def animate(ds, out, field: str = "deformation", magnification: float | None = N
     """Render one Appendix C movie of a result Dataset: the deformation magnified (x5000 / x1000 /
     x200 for weak / moderate / strong shocks unless `magnification` is given) or the normalised
     energy density w / w0 of eq. (14) on a log colour scale [1e-6, 1]. Returns the written path
-    (.mp4, or .gif if the MP4 encoder is unavailable)."""
+    (.mp4, or .gif if the MP4 encoder is unavailable). ValueError for a bad option (see
+    `check_movie_options`)."""
+    _check_field(field)
+    check_movie_options(max_frames, fps, magnification)
     plan = plan_frames(ds, field, magnification, max_frames)
     return write_movie(lambda: iter_frames(plan), Path(out), fps)
 
@@ -443,11 +517,9 @@ class MovieError(RuntimeError):
 
 def _render_group(jobs: list[MovieJob]) -> list[tuple[bool, str, float]]:
     """Render jobs sharing one result file (read once): [(ok, path or error text, seconds)]."""
-    from .results import read_netcdf
-
     res = []
     try:
-        ds = read_netcdf(jobs[0].result)
+        ds = read_result(jobs[0].result)
     except Exception as e:  # noqa: BLE001 - reported per job
         msg = f"{jobs[0].result}: cannot read: {type(e).__name__}: {e}"
         return [(False, f"{j.out.name}: {msg}", 0.0) for j in jobs]
@@ -479,6 +551,7 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
     for j in jobs:
         try:
             _check_field(j.field)
+            check_movie_options(j.max_frames, j.fps, j.magnification)
         except ValueError as e:
             raise ValueError(f"movie {j.out.name}: {e}") from None
     if not jobs:
@@ -524,6 +597,6 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
     return [Path(results[k][1]) for k in range(len(jobs))]
 
 
-__all__ = ["MAGNIFICATION", "FIELDS", "FramePlan", "MovieFigure", "MovieJob", "MovieError", "animate", "default_magnification",
-           "frame_indices", "granule_energies", "iter_frames", "plan_frames", "render_movies",
-           "solid_states", "write_movie"]
+__all__ = ["MAGNIFICATION", "FIELDS", "FramePlan", "MovieFigure", "MovieJob", "MovieError", "ResultFileError", "animate",
+           "check_movie_options", "check_result", "default_magnification", "frame_indices", "granule_energies", "iter_frames",
+           "plan_frames", "read_result", "render_movies", "solid_states", "write_movie"]

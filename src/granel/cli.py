@@ -66,6 +66,24 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     return S.validate(raw, base)
 
 
+def _check_run_paths(output: Path, scenario: str, resume: Path | None, checkpoints: bool) -> Path:
+    """The result and checkpoint paths of `granel run`, checked before any computation (exit 2 or
+    4): the checkpoint is the result's name with .ckpt; an existing one is only ever replaced or
+    removed by the run that resumes from it."""
+    from .paths import OutputPathError, check_result_path
+
+    try:
+        check_result_path(output, "-o", inputs=(scenario, resume))
+    except OutputPathError as e:
+        _fail(str(e), code=e.code)
+    ckpt = output.with_suffix(".ckpt")
+    source = None if resume is None else (resume if resume.suffix == ".ckpt" else resume.with_suffix(".ckpt"))
+    resuming = source is not None and source.exists() and source.resolve() == ckpt.resolve()
+    if checkpoints and ckpt.exists() and not resuming:
+        _fail(f"{ckpt} exists (the checkpoint of an earlier run?): continue it with --resume {ckpt}, or move it away")
+    return ckpt
+
+
 def _without_dask() -> None:
     """A single run never uses dask, but xarray imports it (and distributed) whenever it checks
     whether an array is a dask array: about 0.6 s of a short run's fixed cost. Marking dask as
@@ -100,6 +118,12 @@ def run(
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
     sc = _load_or_fail(scenario, ov, _shock_level(shock))
+    ckpt = _check_run_paths(output, scenario, resume, sc.simulation.checkpoint_every > 0)
+    from .results import remove_stale_temporaries
+
+    for path in (output, ckpt):
+        for tmp in remove_stale_temporaries(path):
+            console.print(f"removed {tmp}, left by an interrupted run")
     total = sc.simulation.duration
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
                   TextColumn("t = {task.fields[t]}"), TimeElapsedColumn(), TimeRemainingColumn(),
@@ -110,13 +134,17 @@ def run(
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
         try:
-            ds = run_scenario(sc, progress, checkpoint=output.with_suffix(".ckpt"), resume=resume)
+            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume)
         except S.ScenarioError as e:
             _fail(str(e))
         except RuntimeError as e:
             _fail(f"run stopped: {e}", code=3)
-    write_netcdf(ds, output)
-    output.with_suffix(".ckpt").unlink(missing_ok=True)  # finished: the result replaces the checkpoint
+    try:
+        write_netcdf(ds, output)
+    except OSError as e:
+        _fail(f"-o {output}: could not write the result: {e}", code=4)
+    if ckpt.exists() and (sc.simulation.checkpoint_every > 0 or resume is not None):
+        ckpt.unlink()  # finished: the result replaces this run's checkpoint
     summary = summarize(ds)
     summary["output"] = str(output)
     if json_summary:
@@ -264,16 +292,32 @@ def reciprocity(
     from .results import write_netcdf
     from .run import run_scenario
 
+    if a == b:
+        _fail(f"--a and --b are both {a!r}: give two different granules")
+    if out.exists() and not out.is_dir():
+        _fail(f"--out {out}: exists and is not a directory", 4)
     level = _shock_level(shock)
+    # both directions validated before either runs
+    scs = {exc: _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level) for exc in (b, a)}
     runs = {}
-    for exc in (b, a):
-        sc = _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level)
-        with console.status(f"running with the shock on {exc}"):
-            ds = run_scenario(sc)
-        write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
+    for exc, sc in scs.items():
+        try:
+            with console.status(f"running with the shock on {exc}"):
+                ds = run_scenario(sc)
+        except S.ScenarioError as e:
+            _fail(str(e))
+        except RuntimeError as e:
+            _fail(f"run with the shock on {exc} stopped: {e}", 3)
+        try:
+            write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
+        except OSError as e:
+            _fail(f"--out {out}: cannot write the run ({e})", 4)
         runs[exc] = ds
     m = reciprocity_metrics(runs[b], runs[a])
-    fig3_velocities(runs[b], runs[a], out / "fig3_velocities")
+    try:
+        fig3_velocities(runs[b], runs[a], out / "fig3_velocities")
+    except OSError as e:
+        _fail(f"--out {out}: cannot write the figure ({e})", 4)
     if json_out:
         print(json.dumps(m, indent=2, default=float))
         return
@@ -300,15 +344,32 @@ def animate(
     fps: int = typer.Option(20, help="frames per second"),
 ):
     """Render a movie of a run (Appendix C)."""
-    from .animate import animate as _animate
-    from .results import read_netcdf
-
-    if not result.exists():
-        _fail(f"{result}: no such file")
+    # the options first, before anything is read or imported
+    if frames < 1:
+        _fail(f"--frames {frames}: give a whole number of frames >= 1")
+    if fps < 1:
+        _fail(f"--fps {fps}: give a whole number of frames per second >= 1")
+    if magnification is not None and not (np.isfinite(magnification) and magnification > 0):
+        _fail(f"--magnification {magnification}: give a finite number > 0")
     if field not in ("deformation", "energy-density"):
         _fail(f"--field {field!r}: choose deformation or energy-density")
-    with console.status("rendering"):
-        path = _animate(read_netcdf(result), output, field, magnification, frames, fps)
+    if output.suffix.lower() not in (".mp4", ".gif"):
+        _fail(f"--output {output}: give a .mp4 or .gif file name")
+    if output.is_dir() or any(d.exists() and not d.is_dir() for d in output.parents):
+        _fail(f"--output {output}: is a directory or lies under a file", 4)
+    if not result.exists():
+        _fail(f"{result}: no such file")
+    from .animate import ResultFileError, animate as _animate, read_result
+
+    try:
+        ds = read_result(result)
+    except ResultFileError as e:
+        _fail(str(e), 4)
+    try:
+        with console.status("rendering"):
+            path = _animate(ds, output, field, magnification, frames, fps)
+    except OSError as e:
+        _fail(f"--output {output}: cannot write the movie ({e})", 4)
     console.print(f"wrote {path}")
 
 
@@ -343,11 +404,18 @@ def sweep(
     workers: int = typer.Option(2, help="LocalCluster worker processes (ignored with --scheduler)"),
     scheduler: Optional[str] = typer.Option(None, help="address of a running dask scheduler, e.g. tcp://host:8786"),
 ):
-    """Run a parameter sweep on dask.distributed; re-running skips finished cases."""
-    from .sweep import cases, load_sweep, run_sweep
+    """Run a parameter sweep on dask.distributed; re-running skips finished cases.
+    Exit code 3 if any case failed."""
+    if not scheduler and workers < 1:
+        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    if out.exists() and not out.is_dir():
+        _fail(f"--out {out}: exists and is not a directory", 4)
+    from .sweep import SchedulerError, SweepFileError, cases, load_sweep, run_sweep
 
     try:
         spec, _ = load_sweep(sweep_file)
+    except SweepFileError as e:
+        _fail(str(e), 4)
     except S.ScenarioError as e:
         _fail(str(e))
     n = len(cases(spec))
@@ -361,9 +429,16 @@ def sweep(
                 failed.append(r)
             bar.update(task, advance=1)
 
-        ds = run_sweep(sweep_file, out, workers, scheduler, progress)
+        try:
+            ds = run_sweep(sweep_file, out, workers, scheduler, progress)
+        except SchedulerError as e:
+            _fail(f"--scheduler {scheduler}: {e}", e.code)
+        except S.ScenarioError as e:
+            _fail(f"{sweep_file}: {e}")
+        except OSError as e:
+            _fail(f"--out {out}: cannot write the sweep's results ({e})", 4)
     metrics = [v for v in ds.data_vars if v != "status"]
-    t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok")
+    t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok, {len(failed)} failed")
     for m in metrics:
         v = ds[m].values
         if np.isfinite(v).any():
@@ -372,6 +447,9 @@ def sweep(
     for r in failed:
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
+    if failed:
+        _fail(f"{len(failed)} of {n} cases failed (listed above; their status is in {out / 'summary.nc'}); "
+              "a rerun retries them", 3)
 
 
 @app.command("map")
@@ -383,13 +461,25 @@ def map_(
     y: Optional[str] = typer.Option(None, help="axis along y (default: the second)"),
 ):
     """Draw a design map: a metric over two sweep axes (panels over a third)."""
-    from .results import read_netcdf
-    from .sweep import plot_map
+    from matplotlib.backend_bases import FigureCanvasBase
 
+    from .sweep import SummaryFileError, plot_map, read_summary
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    if output.suffix.lower().lstrip(".") not in kinds:
+        _fail(f"--output {output}: give a picture file name (.png, .pdf, .svg, ...)")
+    if output.is_dir() or any(d.exists() and not d.is_dir() for d in output.parents):
+        _fail(f"--output {output}: is a directory or lies under a file", 4)
     if not summary.exists():
         _fail(f"{summary}: no such file")
     try:
-        plot_map(read_netcdf(summary), output, metric, x, y)
+        ds = read_summary(summary)
+    except SummaryFileError as e:
+        _fail(str(e), 4)
+    try:
+        plot_map(ds, output, metric, x, y)
+    except OSError as e:
+        _fail(f"--output {output}: cannot write the map ({e})", 4)
     except ValueError as e:
         _fail(str(e))
     console.print(f"wrote {output}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .coupling.driver import Schedule
+from .coupling.driver import Guards, Schedule
 from .coupling.solver import SolverSettings
 from .granular.system import GranularState, GranularSystem
 from .solid.base import SolidModel
@@ -21,3 +21,4 @@ class Problem:
     settings: SolverSettings
     schedule: Schedule
     source: str = ""  # the scenario as TOML
+    guards: Guards = Guards()  # the driver's stop rules

@@ -76,7 +76,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     """Solve a built problem and return its result Dataset."""
     solver = make_solver(problem, sparse)
     fp = fingerprint(problem.source + problem.settings.method)
-    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp)
+    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards)
     solid = problem.solid
     steps = np.asarray(traj.steps["h"], float)
     its = np.asarray(traj.steps["iterations"], float)

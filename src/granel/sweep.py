@@ -19,7 +19,13 @@ A sweep file (TOML):
     name = "load"
     zip = { "excitations.0.kind" = ["half_sine", "burst"], "excitations.0.frequency" = [1.0, 2e4] }
 
-Cases are the Cartesian product of the axes.
+Cases are the Cartesian product of the axes (at most MAX_CASES).
+
+Resume: a finished case leaves `cases/<tag>.json` (its metrics or its error) and one NetCDF per
+run. A rerun reuses a case's metrics only if it finished ok and its fingerprint matches (see
+`case_fingerprint`: the scenario text of each run, which carries the solver settings, the sweep's
+and the case's overrides, mode and pair, the granel version and the metric rules); a run's
+NetCDF only if its scenario text and granel version match. Failed cases are always rerun.
 """
 
 from __future__ import annotations
@@ -36,7 +42,32 @@ import numpy as np
 import xarray as xr
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from . import __version__
 from . import scenario as S
+
+# a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
+MAX_CASES = 100_000
+# the version of the metric definitions: bumped when one changes (2: arrivals relative to the
+# driven granule, `analysis.reciprocity.pulse_arrival`), so that cached results are recomputed
+METRIC_RULES = 2
+
+
+class SweepFileError(S.ScenarioError):
+    """A sweep file that exists but cannot be read (a directory, unreadable, not UTF-8 text)."""
+
+
+class SchedulerError(RuntimeError):
+    """The sweep's dask cluster cannot be used: `code` 2 for a malformed address, 4 for a
+    scheduler that cannot be reached or has no worker."""
+
+    def __init__(self, msg: str, code: int):
+        super().__init__(msg)
+        self.code = code
+
+
+class SummaryFileError(ValueError):
+    """A file that cannot be read as a sweep summary (unreadable, truncated, not NetCDF, or a
+    NetCDF file of something else). The message names the file."""
 
 
 class AxisSpec(BaseModel):
@@ -55,6 +86,8 @@ class AxisSpec(BaseModel):
             raise ValueError(f"an axis needs exactly one of values, linspace, logspace, zip (got {kinds or 'none'})")
         if self.zip is None and not self.field:
             raise ValueError("an axis needs 'field' (or 'zip' with 'name')")
+        if self.values is not None and not self.values:
+            raise ValueError("an axis needs at least one value, got values = []")
         if self.zip is not None:
             if not self.name:
                 raise ValueError("a zipped axis needs a 'name'")
@@ -65,9 +98,20 @@ class AxisSpec(BaseModel):
             v = getattr(self, k)
             if v is not None and v[2] < 1:
                 raise ValueError(f"{k} needs a positive count, got {v[2]}")
+            if v is not None and not (np.isfinite(v[0]) and np.isfinite(v[1])):
+                raise ValueError(f"{k} bounds must be finite, got {v[0]}, {v[1]}")
             if k == "logspace" and v is not None and (v[0] <= 0 or v[1] <= 0):
                 raise ValueError("logspace bounds must be positive")
         return self
+
+    @property
+    def size(self) -> int:
+        """The number of points of this axis."""
+        if self.zip is not None:
+            return len(next(iter(self.zip.values())))
+        if self.values is not None:
+            return len(self.values)
+        return int((self.linspace or self.logspace)[2])
 
     @property
     def dim(self) -> str:
@@ -108,15 +152,26 @@ class SweepSpec(BaseModel):
         dims = [a.dim for a in self.axes]
         if len(set(dims)) != len(dims):
             raise ValueError(f"axis names must be unique, got {dims}")
+        n = 1
+        for a in self.axes:
+            n *= a.size
+        if n > MAX_CASES:
+            raise ValueError(f"{n} cases: more than {MAX_CASES}; split the sweep")
         return self
 
 
 def load_sweep(path) -> tuple[SweepSpec, Path]:
     path = Path(path)
+    if not path.exists():
+        raise S.ScenarioError(f"sweep {path}: no such file")
     try:
-        raw = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        raise S.ScenarioError(f"sweep {path}: {e}") from None
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise SweepFileError(f"sweep {path}: cannot read it as text ({e})") from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise S.ScenarioError(f"sweep {path}: not valid TOML: {e}") from None
     try:
         spec = SweepSpec.model_validate(raw)
     except ValidationError as e:
@@ -155,6 +210,60 @@ def _base_path(spec: SweepSpec, base_dir: Path) -> str:
     return str(p if p.is_absolute() else base_dir / p)
 
 
+def check_base(spec: SweepSpec, base_dir: Path) -> None:
+    """Fail early (ScenarioError) when the sweep's base scenario cannot be read or its overrides
+    cannot be applied; whether each case's scenario is valid is each case's business."""
+    base = _base_path(spec, base_dir)
+    try:
+        raw, _ = S.load_raw(base)
+    except (OSError, UnicodeDecodeError) as e:
+        raise S.ScenarioError(f"sweep base {spec.base!r}: cannot read {base} ({e})") from None
+    S.apply_overrides(raw, list(spec.overrides))
+
+
+def case_fingerprint(spec: SweepSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
+    """What a case's cached result depends on: the full scenario text of each of its runs (with
+    every solver setting of its [simulation] table), the sweep's and the case's overrides, the
+    mode and the measurement pair, the granel version and the metric rules."""
+    payload = {
+        "granel_version": __version__,
+        "metric_rules": METRIC_RULES,
+        "mode": spec.mode,
+        "pair": list(spec.pair),
+        "sweep_overrides": list(spec.overrides),
+        "case_overrides": case["overrides"],
+        "scenarios": {key: S.to_toml(sc) for key, sc in scenarios},
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+def _cached_case(done: Path, fp: str, case: dict) -> dict | None:
+    """A case's stored result, if it finished ok with fingerprint fp."""
+    try:
+        r = json.loads(done.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(r, dict) or r.get("status") != "ok" or r.get("fingerprint") != fp or not isinstance(r.get("metrics"), dict):
+        return None
+    r["index"] = list(case["index"])
+    return r
+
+
+def _cached_run(path: Path, text: str):
+    """A run's stored Dataset, if it holds the run of scenario `text` by this granel version."""
+    from .results import read_netcdf
+
+    if not path.exists():
+        return None
+    try:
+        ds = read_netcdf(path)
+    except Exception:  # noqa: BLE001 - truncated, corrupt, foreign: run again
+        return None
+    if ds.attrs.get("scenario") != text or ds.attrs.get("granel_version") != __version__:
+        return None
+    return ds
+
+
 def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[str, S.Scenario]]:
     """The scenario(s) of one case: two (both directions) in reciprocity mode."""
     ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in case["overrides"].items()]
@@ -169,33 +278,32 @@ def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[st
 
 
 def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
-    """Run one case (a worker task): writes its NetCDF file(s), returns its metrics or its error."""
+    """Run one case (a worker task): writes its NetCDF file(s), returns its metrics or its error.
+    A stored result is returned instead only if it finished ok with this case's fingerprint
+    (`case_fingerprint`); a failed case is run again.
+
+    Metrics (reciprocity mode, per direction): arrival_*_s at the measured granule follows
+    `analysis.reciprocity.pulse_arrival` (5 % of the measured peak, NaN unless that peak reaches
+    1e-3 of the driven granule's peak speed, so that round-off never counts as an arrival);
+    arrival_solid_*_s is the first time the solid holds 1 % of the input work."""
     from .analysis.reciprocity import reciprocity_metrics, run_metrics
-    from .results import read_netcdf, write_netcdf
+    from .results import write_netcdf
     from .run import run_scenario
 
     spec = SweepSpec.model_validate_json(spec_json)
     out = Path(out_dir) / "cases"
     done = out / f"{case['tag']}.json"
-    if done.exists():
-        try:
-            return json.loads(done.read_text())
-        except (OSError, ValueError):
-            pass
     res: dict = {"tag": case["tag"], "index": list(case["index"]), "overrides": case["overrides"]}
     try:
+        scenarios = case_scenarios(spec, Path(base_dir), case)
+        res["fingerprint"] = fp = case_fingerprint(spec, scenarios, case)
+        cached = _cached_case(done, fp, case)
+        if cached is not None:
+            return cached
         runs = {}
-        for key, sc in case_scenarios(spec, Path(base_dir), case):
+        for key, sc in scenarios:
             path = out / f"{case['tag']}__{key}.nc"
-            text = S.to_toml(sc)
-            ds = None
-            if path.exists():
-                try:
-                    ds = read_netcdf(path)
-                    if ds.attrs.get("scenario") != text:
-                        ds = None
-                except (OSError, ValueError):
-                    ds = None
+            ds = _cached_run(path, S.to_toml(sc))
             if ds is None:
                 ds = run_scenario(sc)
                 write_netcdf(ds, path)
@@ -258,29 +366,61 @@ def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
     return ds
 
 
-def run_sweep(path, out_dir, workers: int = 2, scheduler: str | None = None, progress=None) -> xr.Dataset:
-    """Run every case on dask.distributed; skips cases already finished in out_dir."""
+def _connect(scheduler: str, timeout: float):
+    """A Client of the scheduler at `scheduler` with at least one worker, or SchedulerError."""
+    from dask.distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=timeout)
+    except (ValueError, TypeError) as e:
+        raise SchedulerError(f"not a scheduler address ({e}); e.g. tcp://host:8786", 2) from None
+    except (OSError, TimeoutError) as e:
+        raise SchedulerError(f"cannot reach the scheduler ({e})", 4) from None
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except (OSError, TimeoutError):
+        client.close()
+        raise SchedulerError(f"the scheduler has no worker after {timeout:g} s", 4) from None
+    return client
+
+
+def run_sweep(path, out_dir, workers: int = 2, scheduler: str | None = None, progress=None,
+              timeout: float = 60.0) -> xr.Dataset:
+    """Run every case on dask.distributed (a LocalCluster of `workers` >= 1 processes, or the
+    scheduler at `scheduler`, which must have a worker within `timeout` seconds); reuses cases
+    already finished in out_dir (see `run_case`). A case whose task fails (e.g. its worker dies)
+    is recorded as failed; an OSError (out_dir not writable) propagates."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .results import write_netcdf
 
+    if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
     spec, base_dir = load_sweep(path)
+    check_base(spec, base_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     todo = cases(spec)
     spec_json = spec.model_dump_json()
     cluster = None
     if scheduler:
-        client = Client(scheduler)
+        client = _connect(scheduler, timeout)
     else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
     results = []
     try:
-        futures = [client.submit(run_case, spec_json, str(base_dir.resolve()), c, str(out.resolve()), key=f"granel-{_key(spec_json, c)}", pure=False)
-                   for c in todo]
+        futures = {client.submit(run_case, spec_json, str(base_dir.resolve()), c, str(out.resolve()), key=f"granel-{_key(spec_json, c)}",
+                                 pure=False): c for c in todo}
         for fut in as_completed(futures):
-            r = fut.result()
+            c = futures[fut]
+            try:
+                r = fut.result()
+            except OSError:
+                raise
+            except Exception as e:  # noqa: BLE001 - e.g. KilledWorker: the case failed, the others go on
+                r = {"tag": c["tag"], "index": list(c["index"]), "overrides": c["overrides"],
+                     "status": f"error: task failed: {type(e).__name__}: {e}"}
             results.append(r)
             if progress is not None:
                 progress(r)
@@ -297,8 +437,39 @@ def _key(spec_json: str, case: dict) -> str:
     return hashlib.sha1((spec_json + case["tag"]).encode()).hexdigest()[:16]
 
 
+def read_summary(path) -> xr.Dataset:
+    """A sweep's summary.nc, checked: raises SummaryFileError (naming the file) for a directory,
+    an unreadable, truncated or non-NetCDF file, or a NetCDF file that is not a granel sweep
+    summary (no `sweep` description, no `status`, dimensions other than the sweep's axes)."""
+    from .results import read_netcdf
+
+    path = Path(path)
+    if path.is_dir():
+        raise SummaryFileError(f"{path}: a directory, not a sweep summary file")
+    try:
+        ds = read_netcdf(path)
+    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
+        first = (str(e).strip().splitlines() or [""])[0]
+        raise SummaryFileError(f"{path}: cannot be read as NetCDF ({type(e).__name__}: {first})") from None
+    if "sweep" not in ds.attrs or "status" not in ds:
+        raise SummaryFileError(f"{path}: not a granel sweep summary (no sweep description or status)")
+    try:
+        spec = SweepSpec.model_validate_json(ds.attrs["sweep"])
+    except (ValidationError, ValueError, TypeError):
+        raise SummaryFileError(f"{path}: not a granel sweep summary (its sweep description is invalid)") from None
+    dims = tuple(a.dim for a in spec.axes)
+    shape = tuple(a.size for a in spec.axes)
+    for name, v in ds.data_vars.items():
+        if v.dims != dims or v.shape != shape:
+            raise SummaryFileError(f"{path}: damaged sweep summary ({name} has dimensions {dict(v.sizes)}, "
+                                   f"the sweep's axes are {dict(zip(dims, shape))})")
+    return ds
+
+
 def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", x: str | None = None, y: str | None = None):
-    """A metric over two sweep axes; remaining axes become panels (first index of any beyond)."""
+    """A metric over two sweep axes; remaining axes become panels (first index of any beyond).
+    ValueError (naming the metric or axis) for an unknown metric or axis, or a metric without a
+    finite value."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -307,11 +478,22 @@ def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", 
     from .plots import save
 
     if metric not in summary:
-        raise ValueError(f"unknown metric {metric!r}; available: {', '.join(v for v in summary.data_vars if v != 'status')}")
+        raise ValueError(f"--metric {metric!r}: unknown metric; available: {', '.join(v for v in summary.data_vars if v != 'status')}")
     da = summary[metric]
     dims = list(da.dims)
-    x = x or dims[0]
-    y = y or (dims[1] if len(dims) > 1 else None)
+    for opt, d in (("x", x), ("y", y)):
+        if d is not None and d not in dims:
+            raise ValueError(f"--{opt} {d!r}: not an axis of the sweep; axes: {', '.join(dims)}")
+    if x is not None and x == y:
+        raise ValueError(f"--x and --y are both {x!r}: choose two different axes")
+    if da.dtype.kind not in "fiu":
+        raise ValueError(f"--metric {metric!r}: not a numeric metric")
+    if not np.isfinite(da.values).any():
+        raise ValueError(f"--metric {metric!r}: no finite value in this sweep (its cases failed, or it never occurred)")
+    x = x or next((d for d in dims if d != y), dims[0])
+    y = y or next((d for d in dims if d != x), None)
+    if x == y:
+        raise ValueError(f"--x and --y are both {x!r}: the metric has one axis only")
     rest = [d for d in dims if d not in (x, y)]
     panels = [{}]
     if rest:

@@ -11,14 +11,16 @@ import math
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..trajectory import Trajectory
 
 
 @dataclass(frozen=True)
 class Schedule:
-    """When outputs, solid snapshots and checkpoints happen. Outputs fall on multiples of the
-    step dt: every `per` steps, `outputs` of them after t = 0."""
+    """When outputs, solid snapshots and checkpoints happen: at multiples of output_every,
+    `outputs` of them after t = 0; fixed-step solvers reach them every `per` steps dt."""
 
     duration: float
     dt: float
@@ -32,7 +34,9 @@ class Schedule:
 
     @property
     def outputs(self) -> int:
-        return int(math.ceil(self.duration / (self.per * self.dt) - 1e-9))
+        """Outputs after t = 0; the last at `duration` (the scenario checks make it a whole number
+        of output intervals)."""
+        return max(1, int(round(self.duration / self.output_every)))
 
     @property
     def solid_every(self) -> int:
@@ -44,26 +48,75 @@ class Schedule:
         return max(1, int(round(self.checkpoint_every / (self.per * self.dt)))) if self.checkpoint_every > 0 else 0
 
 
-def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "") -> Trajectory:
+class PhysicsStop(RuntimeError):
+    """The run left the physics it models (a balance lost, granules passing through each other
+    or through a wall or the solid, a non-finite state); the message says when, where and why."""
+
+
+@dataclass(frozen=True)
+class Guards:
+    """The driver's stop rules, checked at every output: the energy ledger (13), E + D - W minus
+    its initial value, within `balance_limit` of the energy put in (the input work or the initial
+    energy, whichever is larger), and no overlap deeper than `overlap_limit` of the smaller
+    radius (eq. 2: the paper's overlaps are below 1 %)."""
+
+    balance_limit: float = 1e-2
+    overlap_limit: float = 0.1
+
+
+def _guarded(obs: dict, ledger0: float, energy0: float, guards: Guards, t: float) -> dict:
+    """The observation with the balance error relative to the initial ledger, after the checks."""
+    obs = dict(obs)
+    ratio, where = obs.pop("overlap_ratio", 0.0), obs.pop("overlap_at", "")
+    obs["balance_error"] = obs["balance_error"] - ledger0
+    if not (np.all(np.isfinite(obs["pos"])) and np.all(np.isfinite(obs["vel"]))):
+        raise PhysicsStop(f"t = {t:.6e} s: the granular state is not finite")
+    scale = max(abs(float(obs["input_work"])), energy0)
+    if scale > 0 and abs(obs["balance_error"]) > guards.balance_limit * scale:
+        raise PhysicsStop(f"t = {t:.6e} s: the energy balance (13) is off by {abs(obs['balance_error']) / scale:.2e} of the "
+                          f"energy put in (limit simulation.balance_limit = {guards.balance_limit:g}): the results would be "
+                          "wrong; reduce simulation.dt (or the tolerances) or check the loads")
+    if ratio > guards.overlap_limit:
+        raise PhysicsStop(f"t = {t:.6e} s: {where} overlap by {ratio:.1%} of the radius (limit simulation.overlap_limit = "
+                          f"{guards.overlap_limit:g}): the step is too large for the loads or a body passed through another; "
+                          "reduce simulation.dt or the loads")
+    return obs
+
+
+def _ledger(obs: dict) -> float:
+    return float(np.sum(obs["energy_media"]) + obs["energy_solid"] + obs["dissipated_viscous"] + obs["dissipated_friction"]
+                 - obs["input_work"])
+
+
+def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "",
+          guards: Guards | None = None) -> Trajectory:
     """Run `solver` through `schedule`: record every output, store the solid state at its
     outputs, report progress(t) and write a resumable checkpoint every `checkpoint_every`
-    (atomically, with `fingerprint` naming the scenario); `resume` continues from such a file."""
+    (atomically, with `fingerprint` naming the scenario); `resume` continues from such a file.
+    Every output passes the `guards` (a `PhysicsStop` otherwise)."""
+    guards = guards or Guards()
     if resume is not None:
         arrays, recorded, _ = load_checkpoint(resume, fingerprint)
         solver.load(arrays)
         traj = Trajectory.unpack(recorded)
         start = int(arrays["k"])
+        first = {k: traj.rec[k][0] for k in ("energy_media", "energy_solid", "dissipated_viscous", "dissipated_friction",
+                                             "input_work")}
+        ledger0 = _ledger(first)  # the recorded balance starts at zero: rebuild the initial ledger
+        energy0 = float(np.sum(first["energy_media"]) + first["energy_solid"])
     else:
         solver.start()
         traj = Trajectory()
-        traj.record(solver.t, solver.observe())
+        obs = solver.observe()
+        ledger0, energy0 = _ledger(obs), float(np.sum(obs["energy_media"]) + obs["energy_solid"])
+        traj.record(solver.t, _guarded(obs, ledger0, energy0, guards, solver.t))
         traj.record_solid(solver.t, solver.solid_snapshot())
         start = 0
     every = schedule.checkpoint_period() if checkpoint else 0
     t_wall = time.perf_counter()
     for k in range(start, schedule.outputs):
         solver.advance(k + 1, traj)
-        traj.record(solver.t, solver.observe())
+        traj.record(solver.t, _guarded(solver.observe(), ledger0, energy0, guards, solver.t))
         if (k + 1) % schedule.solid_every == 0:
             traj.record_solid(solver.t, solver.solid_snapshot())
         if progress is not None:

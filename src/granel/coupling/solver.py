@@ -192,10 +192,13 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
     ek, ep = solid_energy
     dv, df, w = g.dissipated_viscous, g.dissipated_friction, g.input_work
     normals = np.array([c.normal for c in system.solid_contacts], float).reshape(-1, 2)
+    ratio, where = stepper.deepest_overlap(g, su)
+    # balance_error: the ledger E + D - W here; the driver subtracts its initial value (eq. 13)
     return {"pos": g.pos.copy(), "theta": g.theta.copy(), "vel": g.vel.copy(), "omega": g.omega.copy(), "energy_media": em,
             "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
             "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
-            "force_normal": np.einsum("ij,ij->i", F, normals), "force_tangential": np.einsum("ij,ij->i", F, tangents)}
+            "force_normal": np.einsum("ij,ij->i", F, normals), "force_tangential": np.einsum("ij,ij->i", F, tangents),
+            "overlap_ratio": ratio, "overlap_at": where}
 
 
 class ExactSolver:
@@ -286,7 +289,7 @@ class ExactSolver:
 
     def advance(self, k: int, trajectory) -> None:
         """Steps until the clock passes output k; the state there comes by dense output."""
-        target = k * self.schedule.per * self.settings.dt
+        target = k * self.schedule.output_every if self.settings.adaptive else k * self.schedule.per * self.settings.dt
         st = self.st
         while st.clock[0] < target * (1 - 1e-12):
             status, m = exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache, self.cfg,

@@ -356,6 +356,27 @@ class Stepper:
         su = self.still.u0 if su is None else su
         return kernels.granule_energies(state.y, self.model, su)
 
+    def deepest_overlap(self, state: GranularState, su=None) -> tuple[float, str]:
+        """The largest overlap of any contact (pair, wall, solid point; eq. 2) over the smaller
+        radius, and where it is: a guard against granules passing through each other, a wall or
+        the solid."""
+        dp, dw, ds = kernels.overlaps(state.y, self.model, self.still.u0 if su is None else su)
+        R, m, lab = self.system.radius, self.model, self.system.labels
+        cands = [(0.0, "")]
+        if dp.size:
+            r = dp / np.minimum(R[m.pairs.i], R[m.pairs.j])
+            k = int(np.argmax(r))
+            cands.append((float(r[k]), f"granules {lab[m.pairs.i[k]]} and {lab[m.pairs.j[k]]}"))
+        if dw.size:
+            r = dw / R[m.walls.g]
+            k = int(np.argmax(r))
+            cands.append((float(r[k]), f"granule {lab[m.walls.g[k]]} and wall {int(m.walls.w[k])}"))
+        if ds.size:
+            r = ds / R[m.points.g]
+            k = int(np.argmax(r))
+            cands.append((float(r[k]), f"granule {lab[m.points.g[k]]} and the solid"))
+        return max(cands)
+
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:
         """Energy of each medium, eq. (11): shape (n_media,)."""
         kin, rot, pot = self.energies(state, su)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..coupling.driver import Schedule
+from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
 from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
@@ -119,9 +119,12 @@ def build_granular(sc: Scenario, base: Path | None = None):
 def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
     """An upper bound for the RK4 step: 1/20 of the shortest Hertz collision time expected
     (granule pairs of each size and granule-wall impacts at the largest speed an excitation
-    can impart, impulse / mass), and 1/10 of the shortest pulse duration."""
+    or an initial velocity can impart, impulse / mass), 1/20 of the period of such a contact
+    compressed by the largest load (constant and tabulated loads included), and 1/10 of the
+    shortest pulse duration."""
     bounds = []
     speed = init_speed
+    force = max((e.history.peak() for e in excitations if math.isfinite(e.history.peak())), default=0.0)
     for e in excitations:
         m = system.mass[e.granule]
         J = e.history.peak_impulse()
@@ -131,7 +134,7 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             bounds.append(e.history.params[1] / 10.0)
         elif e.history.kind == "burst":
             bounds.append(1.0 / (e.history.params[1] * 20.0))
-    if speed > 0 and system.n:
+    if (speed > 0 or force > 0) and system.n:
         kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
         for g in np.unique(kinds, axis=0, return_index=True)[1]:
             R, m = system.radius[g], system.mass[g]
@@ -139,8 +142,12 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             Ew = effective_modulus(system.E[g], system.nu[g])
             for (Es, Rs, ms) in ((E2, R / 2, m / 2), (Ew, R, m)):
                 A = 4.0 / 3.0 * Es * math.sqrt(Rs)
-                dmax = (5.0 * ms * speed**2 / (4.0 * A)) ** 0.4
-                bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
+                if speed > 0:
+                    dmax = (5.0 * ms * speed**2 / (4.0 * A)) ** 0.4
+                    bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
+                if force > 0:  # a sustained load: the contact's period about the overlap it compresses to
+                    delta = (force / A) ** (2.0 / 3.0)
+                    bounds.append(2.0 * math.pi * math.sqrt(ms / (1.5 * A * math.sqrt(delta))) / 20.0)
     return min(bounds) if bounds else math.inf
 
 
@@ -170,6 +177,7 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
         if inside.any():
             g = int(np.flatnonzero(inside)[0])
             raise ScenarioError(f"media: granule {system.labels[g]} overlaps the solid at x = {pos[g, 0]:.4g} m")
+    check_load_overlaps(sc, system)
     speed = max((math.hypot(*iv.v) for iv in sc.initial_velocities), default=0.0)
     bound = safe_time_step(system, system.excitations, speed)
     dt = sc.simulation.dt
@@ -178,8 +186,63 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
             f"simulation.dt = {dt:.3e} s: larger than the safe bound {bound:.3e} s "
             "(1/20 of the shortest expected Hertz collision, 1/10 of the pulse)"
         )
-    if sc.simulation.output_every < dt:
-        raise ScenarioError(f"simulation.output_every = {sc.simulation.output_every:.3e} s: shorter than dt = {dt:.3e} s")
+    check_times(sc.simulation)
+
+
+def check_load_overlaps(sc: Scenario, system) -> None:
+    """Refuse loads and initial velocities that would drive a contact beyond
+    simulation.overlap_limit of the radius, where Hertz contact (eq. 2) no longer holds: a force
+    F pressing its granule on a wall even statically, delta = (F / A)^(2/3), or the speed it
+    imparts (impulse / mass), or an initial speed v, in a head-on impact on a wall, delta =
+    (5 m v^2 / (4 A))^(2/5) (the wall is the stiffer contact: R* = R, m* = m)."""
+    limit = sc.simulation.overlap_limit
+
+    def wall_A(g):
+        return 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g]) * math.sqrt(system.radius[g])
+
+    def refuse(where, what, g, delta):
+        raise ScenarioError(f"{where}: {what} would press granule {system.labels[g]} {delta / system.radius[g]:.1%} of its "
+                            f"radius into a contact (limit simulation.overlap_limit = {limit:g}); Hertz contact (eq. 2) "
+                            "does not hold there")
+
+    for k, e in enumerate(system.excitations):
+        g, F, J = e.granule, e.history.peak(), e.history.peak_impulse()
+        if math.isfinite(F) and F > 0 and (F / wall_A(g)) ** (2.0 / 3.0) > limit * system.radius[g]:
+            refuse(f"excitations.{k}", f"a peak force of {F:.3e} N", g, (F / wall_A(g)) ** (2.0 / 3.0))
+        if math.isfinite(J) and J > 0:
+            v = J / system.mass[g]
+            delta = (5.0 * system.mass[g] * v * v / (4.0 * wall_A(g))) ** 0.4
+            if delta > limit * system.radius[g]:
+                refuse(f"excitations.{k}", f"an impulse of {J:.3e} N s (speed {v:.3e} m/s)", g, delta)
+    labels = list(system.labels)
+    for k, iv in enumerate(sc.initial_velocities):
+        g, v = labels.index(iv.granule), math.hypot(*iv.v)
+        delta = (5.0 * system.mass[g] * v * v / (4.0 * wall_A(g))) ** 0.4
+        if delta > limit * system.radius[g]:
+            refuse(f"initial_velocities.{k}", f"an initial speed of {v:.3e} m/s", g, delta)
+
+
+def check_times(sim) -> None:
+    """Outputs fall on multiples of output_every and the last one exactly at duration: output_every
+    must be a whole number of steps dt (for the adaptive exact integrator, dt is only the first
+    step and any output_every >= dt will do) and duration a whole number of output intervals."""
+    dt, every, duration = sim.dt, sim.output_every, sim.duration
+    if duration < dt:
+        raise ScenarioError(f"simulation.duration = {duration:.3e} s: shorter than the step simulation.dt = {dt:.3e} s")
+    if every > duration * (1 + 1e-9):
+        raise ScenarioError(f"simulation.output_every = {every:.3e} s: longer than simulation.duration = {duration:.3e} s "
+                            "(set output_every to the duration or less)")
+    if every < dt * (1 - 1e-9):
+        raise ScenarioError(f"simulation.output_every = {every:.3e} s: shorter than the step simulation.dt = {dt:.3e} s")
+    fixed = not (sim.solver == "fast" and sim.integrator == "exact" and sim.adaptive)
+    per = every / dt
+    if fixed and abs(per - round(per)) > 1e-6 * per:
+        raise ScenarioError(f"simulation.output_every = {every:.3e} s is {per:.4g} steps of simulation.dt = {dt:.3e} s: "
+                            f"outputs must fall on steps (e.g. dt = {every / max(1, math.ceil(per)):.4e} s)")
+    n = duration / every
+    if abs(n - round(n)) > 1e-6 * max(n, 1.0):
+        raise ScenarioError(f"simulation.duration = {duration:.4e} s is {n:.4g} output intervals of {every:.3e} s: the last "
+                            f"output must fall at the duration (e.g. duration = {math.ceil(n) * every:.4e} s)")
 
 
 def build_solid(sc: Scenario, system) -> SolidModel:
@@ -218,4 +281,5 @@ def build_problem(sc: Scenario) -> Problem:
     built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
     system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
     state = type(state)(state.y.copy(), state.t)
-    return Problem(system, state, build_solid(sc, system), solver_settings(sc), schedule(sc), text)
+    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit)
+    return Problem(system, state, build_solid(sc, system), solver_settings(sc), schedule(sc), text, guards)
