@@ -296,3 +296,36 @@ def test_exit_codes(tmp_path, monkeypatch, args, code):
     r = invoke(["--solid", "rigid", "--duration", "5us", *args, "-o", "x.nc"])
     assert r.exit_code == code, r.output
     assert not (tmp_path / "x.nc").exists()
+
+
+# ---------------------------------------------------------------- runaway cost
+
+
+@pytest.mark.parametrize("override, words", [
+    ("contact.k_s=1e12", ["contact.k_s", "sub-steps"]),
+    ("contact.k_s=1e8", ["contact.k_s", "sub-steps"]),
+    ("contact.alpha_n=1e6", ["contact.alpha_n", "too fast for RK4"]),
+])
+def test_contact_laws_too_stiff_for_the_step_are_refused(override, words):
+    """These hung with no message: 4e8 sub-steps per step, or a damping rate 2300 times beyond
+    RK4's stability at 40 ns."""
+    refused([override], *words)
+
+
+def test_a_stiff_but_feasible_friction_runs():
+    """k_s = 1e4 s/m (100 times the paper's) needs sub-steps but stays within the limit."""
+    S.load("paper", ["contact.k_s=1e4"])
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "abc", "nan", "inf"])
+def test_max_wall_must_be_a_positive_time(tmp_path, monkeypatch, value):
+    monkeypatch.chdir(tmp_path)
+    r = invoke([*SMALL, "--max-wall", value, "-o", "x.nc"])
+    assert r.exit_code == 2 and "--max-wall" in r.output
+
+
+def test_max_wall_stops_a_long_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = invoke(["--solid", "rigid", "--duration", "0.8ms", "--max-wall", "0.001s", "-o", "x.nc"])
+    assert r.exit_code == 3 and "wall-time limit" in r.output
+    assert not (tmp_path / "x.nc").exists()

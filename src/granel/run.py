@@ -72,11 +72,13 @@ def load_kinks(system) -> list[float]:
     return out
 
 
-def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None) -> xr.Dataset:
-    """Solve a built problem and return its result Dataset."""
+def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,
+                max_wall: float | None = None) -> xr.Dataset:
+    """Solve a built problem and return its result Dataset (at most `max_wall` seconds of
+    solving: `coupling.driver.WallTimeExceeded` beyond)."""
     solver = make_solver(problem, sparse)
     fp = fingerprint(problem.source + problem.settings.method)
-    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards)
+    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
     solid = problem.solid
     steps = np.asarray(traj.steps["h"], float)
     its = np.asarray(traj.steps["iterations"], float)
@@ -88,9 +90,9 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     return trajectory_dataset(traj, problem.system, solid, attrs, omega)
 
 
-def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None) -> xr.Dataset:
+def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, max_wall: float | None = None) -> xr.Dataset:
     """Run a validated scenario and return its result Dataset."""
-    return run_problem(S.build_problem(sc), progress, checkpoint, resume)
+    return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall)
 
 
 @functools.lru_cache(maxsize=8)

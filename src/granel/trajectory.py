@@ -23,6 +23,7 @@ class Trajectory:
     solid: dict = field(default_factory=lambda: defaultdict(list))  # eta, eta_dot | q, v
     steps: dict = field(default_factory=lambda: {k: [] for k in STEPS})
     solver: dict = field(default_factory=dict)  # settings and counters, for the result's attributes
+    watch: object = None  # called with the latest step time whenever a solver logs steps (progress, wall limit)
 
     def record(self, t: float, obs: dict) -> None:
         self.times.append(float(t))
@@ -39,6 +40,8 @@ class Trajectory:
         self.steps["h"].extend(np.asarray(h, float).tolist())
         self.steps["iterations"].extend(np.asarray(iterations, np.int64).tolist())
         self.steps["lam"].extend(np.asarray(lam, np.float32))
+        if self.watch is not None and len(t):
+            self.watch(float(t[-1]))
 
     # checkpoints: everything as flat named arrays
     def pack(self) -> dict:

@@ -88,13 +88,32 @@ def _ledger(obs: dict) -> float:
                  - obs["input_work"])
 
 
+class WallTimeExceeded(RuntimeError):
+    """The run went past its wall-time limit (`max_wall`)."""
+
+
+def _watcher(progress, max_wall, t_start):
+    """Called between an output's steps (whenever a solver logs them): progress inside long output
+    intervals, and the wall-time limit."""
+
+    def watch(t):
+        if progress is not None:
+            progress(t)
+        if max_wall is not None and time.perf_counter() - t_start > max_wall:
+            raise WallTimeExceeded(f"t = {t:.6e} s: stopped after the wall-time limit of {max_wall:g} s")
+
+    return watch
+
+
 def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "",
-          guards: Guards | None = None) -> Trajectory:
+          guards: Guards | None = None, max_wall: float | None = None) -> Trajectory:
     """Run `solver` through `schedule`: record every output, store the solid state at its
     outputs, report progress(t) and write a resumable checkpoint every `checkpoint_every`
     (atomically, with `fingerprint` naming the scenario); `resume` continues from such a file.
-    Every output passes the `guards` (a `PhysicsStop` otherwise)."""
+    Every output passes the `guards` (a `PhysicsStop` otherwise); past `max_wall` seconds of wall
+    time the run stops (`WallTimeExceeded`), its last checkpoint resumable."""
     guards = guards or Guards()
+    t_start = time.perf_counter()
     if resume is not None:
         arrays, recorded, _ = load_checkpoint(resume, fingerprint)
         solver.load(arrays)
@@ -114,14 +133,15 @@ def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=Non
         start = 0
     every = schedule.checkpoint_period() if checkpoint else 0
     t_wall = time.perf_counter()
+    traj.watch = _watcher(progress, max_wall, t_start)
     for k in range(start, schedule.outputs):
         solver.advance(k + 1, traj)
+        traj.watch(solver.t)
         traj.record(solver.t, _guarded(solver.observe(), ledger0, energy0, guards, solver.t))
         if (k + 1) % schedule.solid_every == 0:
             traj.record_solid(solver.t, solver.solid_snapshot())
-        if progress is not None:
-            progress(solver.t)
         if every and (k + 1) % every == 0 and k + 1 < schedule.outputs:
             save_checkpoint(checkpoint, fingerprint, {**solver.save(), "k": k + 1}, traj.pack(), traj.times)
     traj.solver = {**solver.attributes(), "wall_time_s": time.perf_counter() - t_wall}
+    traj.watch = None
     return traj

@@ -178,6 +178,7 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
             g = int(np.flatnonzero(inside)[0])
             raise ScenarioError(f"media: granule {system.labels[g]} overlaps the solid at x = {pos[g, 0]:.4g} m")
     check_load_overlaps(sc, system)
+    check_contact_rates(sc, system)
     speed = max((math.hypot(*iv.v) for iv in sc.initial_velocities), default=0.0)
     bound = safe_time_step(system, system.excitations, speed)
     dt = sc.simulation.dt
@@ -220,6 +221,48 @@ def check_load_overlaps(sc: Scenario, system) -> None:
         delta = (5.0 * system.mass[g] * v * v / (4.0 * wall_A(g))) ** 0.4
         if delta > limit * system.radius[g]:
             refuse(f"initial_velocities.{k}", f"an initial speed of {v:.3e} m/s", g, delta)
+
+
+# the compiled RK4 follows stiff sliding by sub-steps; beyond this many per step a run would crawl
+MAX_SUBSTEPS = 1000
+# RK4 is stable for a decay rate r with r h below 2.785 (its real-axis limit)
+RK4_REAL_LIMIT = 2.785
+
+
+def check_contact_rates(sc: Scenario, system) -> None:
+    """Refuse contact laws too stiff for the step at the loads' peak force F (or the force of an
+    impact at the initial speeds): the tanh friction (eq. 5) relaxes sliding at mu k_s F / m_eff
+    (1/m_eff = 1/m + R^2/I = 3/m for a disc on a wall), which the granules' RK4 follows with sub-steps
+    of at most 2/rate, up to MAX_SUBSTEPS per step; the Tsuji damping (eq. 3) decays an overlap's
+    rate at gamma / m* = alpha_n sqrt(A / m*) delta^(1/4), which RK4 must follow within its stability
+    limit (rate dt < 2.785)."""
+    c, dt = sc.contact, sc.simulation.dt
+    labels = list(system.labels)
+    pushed = [(e.granule, e.history.peak(), f"the peak force of excitations.{k}") for k, e in enumerate(system.excitations)]
+    for k, iv in enumerate(sc.initial_velocities):
+        g, v = labels.index(iv.granule), math.hypot(*iv.v)
+        if v > 0:  # the peak force of a Hertz impact on a wall: A delta_max^(3/2)
+            A = 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g]) * math.sqrt(system.radius[g])
+            delta = (5.0 * system.mass[g] * v * v / (4.0 * A)) ** 0.4
+            pushed.append((g, A * delta**1.5, f"the impact at initial_velocities.{k}"))
+    for g, F, what in pushed:
+        if not (math.isfinite(F) and F > 0):
+            continue
+        m = system.mass[g]
+        rate = c.mu * c.k_s * F / (m / 3.0)
+        if 1.5 * rate * dt / 2.0 > MAX_SUBSTEPS:
+            raise ScenarioError(f"contact.k_s = {c.k_s:g} s/m: at {what} ({F:.3e} N) the tanh friction (eq. 5) relaxes "
+                                f"sliding at {rate:.2e} 1/s, which needs about {1.5 * rate * dt / 2.0:.1e} RK4 sub-steps "
+                                f"per step dt = {dt:.3e} s (limit {MAX_SUBSTEPS}); lower contact.k_s (the paper: 100 s/m) "
+                                "or simulation.dt")
+        A = 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g]) * math.sqrt(system.radius[g] / 2)
+        ms = m / 2.0
+        delta = (F / A) ** (2.0 / 3.0)
+        decay = c.alpha_n * math.sqrt(A / ms) * delta**0.25
+        if decay * dt > RK4_REAL_LIMIT:
+            raise ScenarioError(f"contact.alpha_n = {c.alpha_n:g}: at {what} ({F:.3e} N) the contact damping (eq. 3) decays "
+                                f"relative motion at {decay:.2e} 1/s, too fast for RK4 at dt = {dt:.3e} s (rate dt = "
+                                f"{decay * dt:.2f} > {RK4_REAL_LIMIT}); lower contact.alpha_n or simulation.dt")
 
 
 def check_times(sim) -> None:
