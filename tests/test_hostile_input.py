@@ -329,3 +329,65 @@ def test_max_wall_stops_a_long_run(tmp_path, monkeypatch):
     r = invoke(["--solid", "rigid", "--duration", "0.8ms", "--max-wall", "0.001s", "-o", "x.nc"])
     assert r.exit_code == 3 and "wall-time limit" in r.output
     assert not (tmp_path / "x.nc").exists()
+
+
+# ---------------------------------------------------------------- fuzzing
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_PAPER = S.load_raw("paper")[0]
+NON_FINITE = st.sampled_from([float("nan"), float("inf"), float("-inf")])
+
+
+def _set(raw, path, value):
+    import copy
+
+    raw = copy.deepcopy(raw)
+    node = raw
+    parts = path.split(".")
+    for p in parts[:-1]:
+        node = node[int(p)] if isinstance(node, list) else node.setdefault(p, {})
+    node[parts[-1]] = value
+    return raw
+
+
+@settings(max_examples=80, deadline=None)
+@given(path=st.sampled_from(NUMBER_FIELDS), value=st.one_of(NON_FINITE, st.booleans()))
+def test_fuzz_non_finite_and_boolean_numbers(path, value):
+    """Any number field given nan, +-inf or a boolean: a ScenarioError naming the field."""
+    with pytest.raises(S.ScenarioError) as err:
+        S.validate(_set(_PAPER, path, value))
+    assert path in str(err.value)
+
+
+@settings(max_examples=40, deadline=None)
+@given(labels=st.lists(st.sampled_from(["a", "b", "c", "d"]), min_size=10, max_size=10))
+def test_fuzz_labels(labels):
+    """Ten labels drawn from four names always repeat: refused, naming the first repeat."""
+    raw = _set(_PAPER, "media.0.labels", labels)
+    first = next(k for k, lab in enumerate(labels) if lab in labels[:k])
+    with pytest.raises(S.ScenarioError) as err:
+        S.validate(raw)
+    assert f"labels.{first}" in str(err.value)
+
+
+CELL = st.one_of(st.sampled_from(["nan", "inf", "-1", "0", "abc", "true", "", "1e-3", "0.005", "-0.02"]),
+                 st.floats(allow_nan=False, allow_infinity=False, width=32).map(repr))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cells=st.lists(st.tuples(st.sampled_from(["A", "B", "C", ""]), CELL, CELL, CELL), min_size=0, max_size=4))
+def test_fuzz_granule_csv(tmp_path, cells):
+    """Random CSV content: either the scenario loads (every value finite, radius positive, labels
+    unique and non-empty, no overlap) or a ScenarioError names the file; never another exception."""
+    path = tmp_path / "g.csv"
+    path.write_text(GRANULES + "".join(",".join(row) + "\n" for row in cells))
+    raw = _set(_set(_PAPER, "media.0.granules_file", str(path)), "media.0.side", "none")
+    raw["media"][0].pop("columns", None)
+    raw["media"][0].pop("radius", None)
+    raw["excitations"] = []
+    try:
+        S.validate(raw)
+    except S.ScenarioError as e:
+        assert "g.csv" in str(e) or "media" in str(e)

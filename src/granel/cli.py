@@ -66,6 +66,26 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     return S.validate(raw, base)
 
 
+def _wall_seconds(text: str | None, option: str) -> float | None:
+    """A wall-time limit: a positive number of seconds, or with a unit (s, min, h)."""
+    if text is None:
+        return None
+    units = {"h": 3600.0, "min": 60.0, "m": 60.0, "s": 1.0}
+    t = text.strip().lower()
+    scale = 1.0
+    for u, f in units.items():
+        if t.endswith(u):
+            t, scale = t[: -len(u)].strip(), f
+            break
+    try:
+        value = float(t) * scale
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        _fail(f"{option} {text!r}: give a positive wall time, e.g. 90s, 30min or 2h")
+    return value
+
+
 def _check_run_paths(output: Path, scenario: str, resume: Path | None, checkpoints: bool) -> Path:
     """The result and checkpoint paths of `granel run`, checked before any computation (exit 2 or
     4): the checkpoint is the result's name with .ckpt; an existing one is only ever replaced or
@@ -106,6 +126,7 @@ def run(
     json_summary: bool = typer.Option(False, "--json-summary", help="print the summary as JSON on stdout"),
     checkpoint_every: Optional[str] = typer.Option(None, help="write a resumable checkpoint at this simulated interval"),
     resume: Optional[Path] = typer.Option(None, help="continue a run from its checkpoint (the -o file's .ckpt)"),
+    max_wall: Optional[str] = typer.Option(None, "--max-wall", help="stop (exit 3) after this wall time, e.g. 30min, 90s or 2h"),
 ):
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
@@ -117,6 +138,7 @@ def run(
         ov.append("simulation.adaptive=false")  # --dt forces a fixed step
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
+    wall_limit = _wall_seconds(max_wall, "--max-wall")
     sc = _load_or_fail(scenario, ov, _shock_level(shock))
     ckpt = _check_run_paths(output, scenario, resume, sc.simulation.checkpoint_every > 0)
     from .results import remove_stale_temporaries
@@ -134,7 +156,7 @@ def run(
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
         try:
-            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume)
+            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit)
         except S.ScenarioError as e:
             _fail(str(e))
         except RuntimeError as e:
@@ -294,11 +316,15 @@ def reciprocity(
 
     if a == b:
         _fail(f"--a and --b are both {a!r}: give two different granules")
-    if out.exists() and not out.is_dir():
-        _fail(f"--out {out}: exists and is not a directory", 4)
     level = _shock_level(shock)
     # both directions validated before either runs
     scs = {exc: _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level) for exc in (b, a)}
+    from .paths import OutputPathError, check_folder_path
+
+    try:
+        check_folder_path(out, "--out")
+    except OutputPathError as e:
+        _fail(str(e), e.code)
     runs = {}
     for exc, sc in scs.items():
         try:
@@ -344,23 +370,27 @@ def animate(
     fps: int = typer.Option(20, help="frames per second"),
 ):
     """Render a movie of a run (Appendix C)."""
-    # the options first, before anything is read or imported
+    from .animate import MAX_FPS, ResultFileError, animate as _animate, read_result
+
+    # the options first, before anything is read
     if frames < 1:
         _fail(f"--frames {frames}: give a whole number of frames >= 1")
-    if fps < 1:
-        _fail(f"--fps {fps}: give a whole number of frames per second >= 1")
+    if not 1 <= fps <= MAX_FPS:
+        _fail(f"--fps {fps}: give a whole number of frames per second from 1 to {MAX_FPS}")
     if magnification is not None and not (np.isfinite(magnification) and magnification > 0):
         _fail(f"--magnification {magnification}: give a finite number > 0")
     if field not in ("deformation", "energy-density"):
         _fail(f"--field {field!r}: choose deformation or energy-density")
     if output.suffix.lower() not in (".mp4", ".gif"):
         _fail(f"--output {output}: give a .mp4 or .gif file name")
-    if output.is_dir() or any(d.exists() and not d.is_dir() for d in output.parents):
-        _fail(f"--output {output}: is a directory or lies under a file", 4)
     if not result.exists():
         _fail(f"{result}: no such file")
-    from .animate import ResultFileError, animate as _animate, read_result
+    from .paths import OutputPathError, check_result_path
 
+    try:
+        check_result_path(output, "--output", inputs=(result,))
+    except OutputPathError as e:
+        _fail(str(e), e.code)
     try:
         ds = read_result(result)
     except ResultFileError as e:
@@ -406,10 +436,9 @@ def sweep(
 ):
     """Run a parameter sweep on dask.distributed; re-running skips finished cases.
     Exit code 3 if any case failed."""
-    if not scheduler and workers < 1:
+    if workers < 1:
         _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
-    if out.exists() and not out.is_dir():
-        _fail(f"--out {out}: exists and is not a directory", 4)
+    from .paths import OutputPathError, check_folder_path
     from .sweep import SchedulerError, SweepFileError, cases, load_sweep, run_sweep
 
     try:
@@ -418,6 +447,10 @@ def sweep(
         _fail(str(e), 4)
     except S.ScenarioError as e:
         _fail(str(e))
+    try:
+        check_folder_path(out, "--out")
+    except OutputPathError as e:
+        _fail(str(e), e.code)
     n = len(cases(spec))
     failed = []
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
@@ -468,10 +501,14 @@ def map_(
     kinds = FigureCanvasBase.get_supported_filetypes()
     if output.suffix.lower().lstrip(".") not in kinds:
         _fail(f"--output {output}: give a picture file name (.png, .pdf, .svg, ...)")
-    if output.is_dir() or any(d.exists() and not d.is_dir() for d in output.parents):
-        _fail(f"--output {output}: is a directory or lies under a file", 4)
     if not summary.exists():
         _fail(f"{summary}: no such file")
+    from .paths import OutputPathError, check_result_path
+
+    try:
+        check_result_path(output, "--output", inputs=(summary,))
+    except OutputPathError as e:
+        _fail(str(e), e.code)
     try:
         ds = read_summary(summary)
     except SummaryFileError as e:
