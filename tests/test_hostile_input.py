@@ -391,3 +391,16 @@ def test_fuzz_granule_csv(tmp_path, cells):
         S.validate(raw)
     except S.ScenarioError as e:
         assert "g.csv" in str(e) or "media" in str(e)
+
+
+@pytest.mark.parametrize("out, code, words", [
+    ("afile", 2, ["--out afile", "not a folder"]),
+    ("/proc/granel-nowhere", 4, ["--out", "cannot write"]),
+])
+def test_paper_checks_its_folder_before_running(tmp_path, monkeypatch, out, code, words):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("keep me")
+    r = runner.invoke(app, ["paper", "--out", out])
+    assert r.exit_code == code, r.output
+    assert all(w in r.output for w in words) and "Traceback" not in r.output
+    assert (tmp_path / "afile").read_text() == "keep me"

@@ -66,6 +66,16 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     return S.validate(raw, base)
 
 
+def _check_folder(path: Path, option: str) -> None:
+    """An output folder, checked before any computation (exit 2 or 4)."""
+    from .paths import OutputPathError, check_folder_path
+
+    try:
+        check_folder_path(path, option)
+    except OutputPathError as e:
+        _fail(str(e), code=e.code)
+
+
 def _wall_seconds(text: str | None, option: str) -> float | None:
     """A wall-time limit: a positive number of seconds, or with a unit (s, min, h)."""
     if text is None:
@@ -273,6 +283,7 @@ def paper(
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
+    _check_folder(out, "--out")
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1))

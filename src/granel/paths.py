@@ -19,10 +19,10 @@ class OutputPathError(ValueError):
         self.code = code
 
 
-def writable_parent(path: Path, option: str) -> None:
-    """The folder of `path` must exist or be creatable, and accept a new file: probed by creating
-    (the folders and) an empty temporary file there, which is removed at once."""
-    parent = path.absolute().parent
+def writable_parent(path: Path, option: str, folder: Path | None = None) -> None:
+    """The folder of `path` (or `folder`) must exist or be creatable, and accept a new file:
+    probed by creating (the folders and) an empty temporary file there, removed at once."""
+    parent = (folder if folder is not None else path.parent).absolute()
     above = parent
     while not above.exists():
         above = above.parent
@@ -55,4 +55,4 @@ def check_folder_path(path: Path, option: str = "--out") -> None:
     """An output folder: not an existing file, and creatable or writable."""
     if path.exists() and not path.is_dir():
         raise OutputPathError(f"{option} {path}: is a file, not a folder")
-    writable_parent(path / "x", option)
+    writable_parent(path, option, folder=path)
