@@ -404,3 +404,15 @@ def test_paper_checks_its_folder_before_running(tmp_path, monkeypatch, out, code
     assert r.exit_code == code, r.output
     assert all(w in r.output for w in words) and "Traceback" not in r.output
     assert (tmp_path / "afile").read_text() == "keep me"
+
+
+@pytest.mark.parametrize("content, code", [(None, 2), (b"not a checkpoint", 4), (b"PK\x03\x04truncated", 4)])
+def test_resume_from_a_missing_or_corrupt_checkpoint(tmp_path, monkeypatch, content, code):
+    monkeypatch.chdir(tmp_path)
+    if content is not None:
+        (tmp_path / "out.ckpt").write_bytes(content)
+    r = invoke([*SMALL, "-o", "out.nc", "--resume", "out.ckpt"])
+    assert r.exit_code == code, r.output
+    assert "out.ckpt" in r.output
+    if content is not None:
+        assert (tmp_path / "out.ckpt").read_bytes() == content  # kept: it was not this run's

@@ -42,6 +42,8 @@ CMAP = "inferno"
 # x264 speed preset: at the same constant quality (quality=7, CRF 15) 'veryfast' takes about half the
 # encoder time of the default 'medium' for a file about 3 % larger
 X264_PRESET = "veryfast"
+# the largest frame rate a movie may ask for (a GIF shows at most 100 frames per second)
+MAX_FPS = 1000
 
 
 def default_magnification(ds) -> float:
@@ -62,11 +64,12 @@ def _check_field(field: str) -> None:
 
 
 def check_movie_options(max_frames=120, fps=20, magnification=None) -> None:
-    """ValueError naming the option for a frame count or frame rate that is not a whole number
-    >= 1, or a magnification that is not a finite number > 0."""
-    for name, v in (("frames", max_frames), ("fps", fps)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"{name} must be a whole number >= 1, got {v!r}")
+    """ValueError naming the option for a frame count that is not a whole number >= 1, a frame
+    rate that is not a whole number from 1 to MAX_FPS, or a magnification that is not a finite
+    number > 0."""
+    for name, v, top in (("frames", max_frames, None), ("fps", fps, MAX_FPS)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1 or (top is not None and v > top):
+            raise ValueError(f"{name} must be a whole number from 1{f' to {top}' if top else ' up'}, got {v!r}")
     if magnification is not None:
         try:
             m = float(magnification)

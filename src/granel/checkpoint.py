@@ -31,7 +31,13 @@ def save_checkpoint(path: str | Path, fp: str, arrays: dict, recorded: dict, tim
 class CheckpointError(RuntimeError):
     """A checkpoint that cannot be resumed: missing, unreadable, truncated or corrupt, not a
     granel checkpoint, or written by another scenario or solver settings. The message names the
-    file. (A RuntimeError, as the errors of `load_checkpoint` always were.)"""
+    file; `code` is the exit code: 2 (a wrong choice: no such file, or another scenario's
+    checkpoint) or 4 (the file cannot be read as a checkpoint). A RuntimeError, as the errors of
+    `load_checkpoint` always were."""
+
+    def __init__(self, message: str, code: int = 4):
+        super().__init__(message)
+        self.code = code
 
 
 # what every checkpoint holds besides the solver's own state arrays
@@ -46,7 +52,7 @@ def load_checkpoint(path: str | Path, fp: str) -> tuple[dict, dict, list]:
     if path.suffix != ".ckpt" and path.with_suffix(".ckpt").exists():
         path = path.with_suffix(".ckpt")
     if not path.exists():
-        raise CheckpointError(f"checkpoint {path}: no such file")
+        raise CheckpointError(f"checkpoint {path}: no such file", 2)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path}: not a file")
     try:
@@ -62,7 +68,7 @@ def load_checkpoint(path: str | Path, fp: str) -> tuple[dict, dict, list]:
         try:
             stored = z["__fingerprint"]
             if stored.shape != () or stored.dtype.kind != "U" or str(stored) != fp:
-                raise CheckpointError(f"checkpoint {path} was written by a different scenario or solver settings")
+                raise CheckpointError(f"checkpoint {path} was written by a different scenario or solver settings", 2)
             state = {k[6:]: z[k] for k in z.files if k.startswith("state:")}
             rec = {k[4:]: list(z[k]) for k in z.files if k.startswith("rec:")}
             times = list(z["__times"])

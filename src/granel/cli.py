@@ -118,7 +118,7 @@ def _without_dask() -> None:
     """A single run never uses dask, but xarray imports it (and distributed) whenever it checks
     whether an array is a dask array: about 0.6 s of a short run's fixed cost. Marking dask as
     absent for this process makes xarray take its no-dask paths."""
-    if "dask" not in sys.modules:
+    if "dask" not in sys.modules and "xarray" not in sys.modules:  # only in a fresh process: xarray caches what it found
         sys.modules["dask"] = None
 
 
@@ -140,6 +140,7 @@ def run(
 ):
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
+    from .checkpoint import CheckpointError
     from .results import write_netcdf
     from .run import run_scenario, summarize
 
@@ -169,6 +170,8 @@ def run(
             ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit)
         except S.ScenarioError as e:
             _fail(str(e))
+        except CheckpointError as e:
+            _fail(str(e), e.code)
         except RuntimeError as e:
             _fail(f"run stopped: {e}", code=3)
     try:

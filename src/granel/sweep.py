@@ -367,14 +367,29 @@ def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
 
 
 def _connect(scheduler: str, timeout: float):
-    """A Client of the scheduler at `scheduler` with at least one worker, or SchedulerError."""
+    """A Client of the scheduler at `scheduler` with at least one worker, or SchedulerError.
+    A Client that fails to connect leaves dask's global `scheduler` setting pointing at it (it
+    is never closed): that setting is put back, else xarray would later lock its file writes
+    through the broken client."""
+    import dask
     from dask.distributed import Client
+    from distributed.comm.addressing import parse_address, parse_host_port
 
+    example = "e.g. tcp://host:8786"
+    try:
+        scheme, loc = parse_address(scheduler)
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(loc)
+    except (ValueError, TypeError) as e:
+        raise SchedulerError(f"not a scheduler address ({e}); {example}", 2) from None
+    before = {"scheduler": dask.config.get("scheduler", None)}
     try:
         client = Client(scheduler, timeout=timeout)
     except (ValueError, TypeError) as e:
-        raise SchedulerError(f"not a scheduler address ({e}); e.g. tcp://host:8786", 2) from None
+        dask.config.set(before)
+        raise SchedulerError(f"not a scheduler address ({e}); {example}", 2) from None
     except (OSError, TimeoutError) as e:
+        dask.config.set(before)
         raise SchedulerError(f"cannot reach the scheduler ({e})", 4) from None
     try:
         client.wait_for_workers(1, timeout=timeout)
@@ -429,7 +444,10 @@ def run_sweep(path, out_dir, workers: int = 2, scheduler: str | None = None, pro
         if cluster is not None:
             cluster.close()
     ds = summary_dataset(spec, results)
-    write_netcdf(ds, out / "summary.nc")
+    import dask
+
+    with dask.config.set(scheduler="synchronous"):  # a plain file lock, whatever client is around
+        write_netcdf(ds, out / "summary.nc")
     return ds
 
 
