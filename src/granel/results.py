@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -58,10 +59,22 @@ def _alive(pid: int) -> bool:
 
 
 def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write atomically (temporary file in the same directory, then rename)."""
-    with atomic_path(path) as tmp:
+    """Write atomically (temporary file in the same directory, then rename). The arrays are in
+    memory, so dask (if this process has it) is told to write synchronously: xarray would
+    otherwise hand the write to whatever dask client is current, even a broken one."""
+    with atomic_path(path) as tmp, _synchronous_dask():
         ds.to_netcdf(tmp, engine="h5netcdf", invalid_netcdf=False)
     return Path(path)
+
+
+@contextmanager
+def _synchronous_dask():
+    dask = sys.modules.get("dask")
+    if dask is None or not hasattr(dask, "config"):
+        yield
+        return
+    with dask.config.set(scheduler="synchronous"):
+        yield
 
 
 def read_netcdf(path: str | Path) -> xr.Dataset:

@@ -73,7 +73,7 @@ class OpsCache(NamedTuple):
 class ExactConfig(NamedTuple):
     h_max: float
     levels: int  # L: the smallest grid step is h_max 2^(-L/4)
-    adaptive: bool  # False: every step is h_max (a fixed step)
+    adaptive: bool  # False: every step is h_max (a fixed step), but for retries of a failed one
     rtol: float
     atol: float  # [m/s]
     v_ref: float  # velocity scale of the error norm [m/s]
@@ -581,8 +581,8 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
         free_response(st, solid, cache, slot, w)
         status, its = hermite_solve(st, t, h, model, cache, slot, cfg, solid.frame, w)
         if status != core.CONVERGED:
-            if level + 2 * GRID_PER_OCTAVE <= cfg.levels and cfg.adaptive:
-                st.meta[0] = level + 2 * GRID_PER_OCTAVE  # a quarter of the step
+            if level + 2 * GRID_PER_OCTAVE <= cfg.levels:
+                st.meta[0] = level + 2 * GRID_PER_OCTAVE  # a quarter of the step (fixed steps: then dt again)
                 st.meta[1] += 1
                 continue
             return status, k

@@ -229,7 +229,7 @@ class ExactSolver:
         self.modes, self.kept = modes, int(len(omega))
         self.solid = exact.ExactSolid(omega, P, static, frame)
         fixed = not settings.adaptive
-        levels = 0 if fixed else 4 * settings.halvings
+        levels = 4 * settings.halvings  # fixed steps use the smaller levels only to retry a failed step
         h_max = settings.dt if fixed else settings.max_step
         nr, m2 = len(omega), 2 * nc
         L = levels + 2
