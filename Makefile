@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-slow test-all install bench clean
+.PHONY: demo test test-slow test-all test-py install bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,9 +28,17 @@ test-slow: install
 test-all: install
 	$(BIN)/python -m pytest -q
 
+# the quick subset on another interpreter present on this machine (make test-py PY=python3.13)
+PY ?= python3.13
+test-py:
+	$(PY) -m venv .venv-$(notdir $(PY))
+	.venv-$(notdir $(PY))/bin/python -m pip install --quiet --upgrade pip
+	.venv-$(notdir $(PY))/bin/python -m pip install --quiet -e '.[test]'
+	.venv-$(notdir $(PY))/bin/python -m pytest -q -m "not slow"
+
 bench: install
 	$(BIN)/python benchmarks/bench_granular.py
 	$(BIN)/python benchmarks/bench_scaling.py
 
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache
+	rm -rf $(VENV) .venv-python3.* demo-out .pytest_cache

@@ -93,16 +93,10 @@ def read_result(path) -> "xr.Dataset":
     ResultFileError (naming the file) for a directory, an unreadable, truncated or non-NetCDF
     file, a NetCDF file without a granel scenario and the per-granule variables, or one whose
     granules are not those of its scenario."""
-    from .results import read_netcdf
+    from .results import read_netcdf_or
 
-    path = Path(path)
-    if path.is_dir():
-        raise ResultFileError(f"{path}: a directory, not a result file")
-    try:
-        ds = read_netcdf(path)
-    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
-        raise ResultFileError(f"{path}: cannot be read as NetCDF ({_first_line(e)})") from None
-    check_result(ds, path)
+    ds = read_netcdf_or(path, ResultFileError)
+    check_result(ds, Path(path))
     return ds
 
 

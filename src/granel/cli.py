@@ -66,6 +66,18 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     return S.validate(raw, base)
 
 
+def _input_and_output(source: Path, output: Path) -> None:
+    """A command's input file must exist (exit 2) and its --output be writable and not the input."""
+    from .paths import OutputPathError, check_result_path
+
+    if not source.exists():
+        _fail(f"{source}: no such file")
+    try:
+        check_result_path(output, "--output", inputs=(source,))
+    except OutputPathError as e:
+        _fail(str(e), e.code)
+
+
 def _check_folder(path: Path, option: str) -> None:
     """An output folder, checked before any computation (exit 2 or 4)."""
     from .paths import OutputPathError, check_folder_path
@@ -397,14 +409,7 @@ def animate(
         _fail(f"--field {field!r}: choose deformation or energy-density")
     if output.suffix.lower() not in (".mp4", ".gif"):
         _fail(f"--output {output}: give a .mp4 or .gif file name")
-    if not result.exists():
-        _fail(f"{result}: no such file")
-    from .paths import OutputPathError, check_result_path
-
-    try:
-        check_result_path(output, "--output", inputs=(result,))
-    except OutputPathError as e:
-        _fail(str(e), e.code)
+    _input_and_output(result, output)
     try:
         ds = read_result(result)
     except ResultFileError as e:
@@ -519,14 +524,7 @@ def map_(
     kinds = FigureCanvasBase.get_supported_filetypes()
     if output.suffix.lower().lstrip(".") not in kinds:
         _fail(f"--output {output}: give a picture file name (.png, .pdf, .svg, ...)")
-    if not summary.exists():
-        _fail(f"{summary}: no such file")
-    from .paths import OutputPathError, check_result_path
-
-    try:
-        check_result_path(output, "--output", inputs=(summary,))
-    except OutputPathError as e:
-        _fail(str(e), e.code)
+    _input_and_output(summary, output)
     try:
         ds = read_summary(summary)
     except SummaryFileError as e:

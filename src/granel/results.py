@@ -77,6 +77,20 @@ def _synchronous_dask():
         yield
 
 
+def read_netcdf_or(path: str | Path, error, what: str = "result file") -> xr.Dataset:
+    """`read_netcdf` for a file given by a user: a directory, or a file that cannot be read as
+    NetCDF (missing, truncated, foreign), raises `error` (an exception class) with a message
+    naming the file."""
+    path = Path(path)
+    if path.is_dir():
+        raise error(f"{path}: a directory, not a {what}")
+    try:
+        return read_netcdf(path)
+    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
+        lines = str(e).strip().splitlines()
+        raise error(f"{path}: cannot be read as NetCDF ({type(e).__name__}{': ' + lines[0] if lines else ''})") from None
+
+
 def read_netcdf(path: str | Path) -> xr.Dataset:
     """Load a result file fully into memory (the file is closed afterwards)."""
     with xr.open_dataset(path, engine="h5netcdf") as ds:

@@ -459,16 +459,10 @@ def read_summary(path) -> xr.Dataset:
     """A sweep's summary.nc, checked: raises SummaryFileError (naming the file) for a directory,
     an unreadable, truncated or non-NetCDF file, or a NetCDF file that is not a granel sweep
     summary (no `sweep` description, no `status`, dimensions other than the sweep's axes)."""
-    from .results import read_netcdf
+    from .results import read_netcdf_or
 
     path = Path(path)
-    if path.is_dir():
-        raise SummaryFileError(f"{path}: a directory, not a sweep summary file")
-    try:
-        ds = read_netcdf(path)
-    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
-        first = (str(e).strip().splitlines() or [""])[0]
-        raise SummaryFileError(f"{path}: cannot be read as NetCDF ({type(e).__name__}: {first})") from None
+    ds = read_netcdf_or(path, SummaryFileError, "sweep summary file")
     if "sweep" not in ds.attrs or "status" not in ds:
         raise SummaryFileError(f"{path}: not a granel sweep summary (no sweep description or status)")
     try:
