@@ -45,7 +45,7 @@ class SolverSettings:
     atol: float = 1e-9  # [m/s]
     max_step: float = 1e-6  # [s]
     mode_cutoff: float = 2e6  # [Hz]: modes above answer statically (residual flexibility)
-    ledger_tol: float = 2e-5  # the step's energy-ledger defects (13) add up to at most this share of the input
+    ledger_tol: float = 1e-5  # the step's energy-ledger defects (13) add up to at most this share of the input
 
     def config(self, max_disp: float) -> core.CoupledConfig:
         paper = self.method == "paper"
@@ -260,7 +260,8 @@ class ExactSolver:
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
                                    y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr), Motion(zc(), zc(), zc(), zc()),
-                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y), self._ledger(y)]),
+                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y), self._ledger(y),
+                                             float(max(0, min(level, self.cfg.levels)))]),
                                    np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
         self.t_out = 0.0
 

@@ -86,7 +86,7 @@ class SimulationSpec(_Strict):
     atol: float = Field(1e-9, ge=0, description="absolute local error tolerance [m/s]")
     max_step: float = Field(1e-6, description="largest adaptive step [s]")
     mode_cutoff: float = Field(2e6, gt=0, description="modes above this frequency [Hz] answer statically (exact integrator)")
-    ledger_tol: float = Field(2e-5, gt=0, lt=1, description="exact integrator: the steps' energy-ledger defects (13) add up to at most this share of the input")
+    ledger_tol: float = Field(1e-5, gt=0, lt=1, description="exact integrator: the steps' energy-ledger defects (13) add up to at most this share of the input")
     balance_limit: float = Field(1e-2, gt=0, description="stop (exit 3) when the energy balance (13) is off by more than this share of the energy put in")
     overlap_limit: float = Field(0.1, gt=0, description="stop (exit 3) when a contact overlaps by more than this share of the smaller radius")
 
