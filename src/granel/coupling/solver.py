@@ -283,6 +283,7 @@ class ExactSolver:
                                            for k in exact.ExactState._fields])
         self.stepper.refresh(arrays["ref_pos"])
         self.t_out = float(arrays["t_out"])
+        self._dense_at = None
 
     @property
     def t(self) -> float:
@@ -312,9 +313,15 @@ class ExactSolver:
         self.t_out = target
 
     def _dense(self):
+        """The state at the output time by dense output, computed once per output (observe and
+        solid_snapshot both read it)."""
+        key = (self.t_out, float(self.st.clock[0]), float(self.st.clock[1]))
+        if getattr(self, "_dense_at", None) is not None and self._dense_at[0] == key:
+            return self._dense_at[1]
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
         exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
+        self._dense_at = (key, (y, eta, etad, F))
         return y, eta, etad, F
 
     def observe(self) -> dict:
