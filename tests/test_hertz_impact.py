@@ -117,3 +117,18 @@ def test_new_contacts_are_detected():
     # t_c (27 us) shifts both by 2.7e-5 m; measured errors 3e-12 m
     assert state.pos[1, 0] == pytest.approx(2.5 * R + T + R + late, abs=1e-9)
     assert state.pos[0, 0] == pytest.approx(2.5 * R + T - R - late, abs=1e-9)
+
+
+def test_overlap_formulas_of_the_input_checks_match_the_contact_law():
+    """The load checks' overlaps (materials.static_overlap, impact_overlap) against the one
+    contact law: the force at the static overlap is F, and the Hertz energy at the impact
+    overlap is the kinetic energy 1/2 m v^2 (the law's own potential, 2/5 A delta^(5/2))."""
+    from granel.granular.contact import hertz_potential, hertz_tsuji_normal
+    from granel.materials import hertz_coefficient, impact_overlap, static_overlap
+
+    A = hertz_coefficient(2.2e11, 5e-3)
+    for F in (1.0, 1.6e3, 1e6):
+        fn, _ = hertz_tsuji_normal(A, 0.0, static_overlap(F, A), 0.0)
+        assert abs(fn - F) < 1e-12 * F
+    for m, v in ((4e-3, 0.3), (4e-3, 100.0), (0.5, 7.0)):
+        assert abs(hertz_potential(A, impact_overlap(m, v, A)) - 0.5 * m * v * v) < 1e-12 * m * v * v

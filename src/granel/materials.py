@@ -54,6 +54,17 @@ def hertz_coefficient(E_star: float, R_star: float) -> float:
     return 4.0 / 3.0 * E_star * math.sqrt(R_star)
 
 
+def static_overlap(force: float, A: float) -> float:
+    """The overlap at which a Hertz contact carries `force` (eq. 2): A delta^(3/2) = F."""
+    return (force / A) ** (2.0 / 3.0)
+
+
+def impact_overlap(m_star: float, speed: float, A: float) -> float:
+    """The largest overlap of an undamped Hertz impact (eq. 2) at closing speed v:
+    1/2 m* v^2 = 2/5 A delta^(5/2), so delta = (5 m* v^2 / (4 A))^(2/5)."""
+    return (5.0 * m_star * speed * speed / (4.0 * A)) ** 0.4
+
+
 def damping_coefficient(alpha_n: float, m_star: float, A: float) -> float:
     """alpha_n sqrt(m* A): gamma = this * delta^(1/4), eq. (3)."""
     return alpha_n * math.sqrt(m_star * A)

@@ -7,7 +7,6 @@ and `attributes()`; the driver never sees the physics inside.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -83,9 +82,10 @@ def _guarded(obs: dict, ledger0: float, energy0: float, guards: Guards, t: float
     return obs
 
 
-def _ledger(obs: dict) -> float:
-    return float(np.sum(obs["energy_media"]) + obs["energy_solid"] + obs["dissipated_viscous"] + obs["dissipated_friction"]
-                 - obs["input_work"])
+def _initial(obs: dict) -> tuple[float, float]:
+    """From the first output: the ledger E + D - W (eq. 13) and the energy E the run starts with."""
+    energy = float(np.sum(obs["energy_media"]) + obs["energy_solid"])
+    return energy + float(obs["dissipated_viscous"] + obs["dissipated_friction"] - obs["input_work"]), energy
 
 
 class WallTimeExceeded(RuntimeError):
@@ -119,15 +119,13 @@ def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=Non
         solver.load(arrays)
         traj = Trajectory.unpack(recorded)
         start = int(arrays["k"])
-        first = {k: traj.rec[k][0] for k in ("energy_media", "energy_solid", "dissipated_viscous", "dissipated_friction",
-                                             "input_work")}
-        ledger0 = _ledger(first)  # the recorded balance starts at zero: rebuild the initial ledger
-        energy0 = float(np.sum(first["energy_media"]) + first["energy_solid"])
+        # the recorded balance starts at zero: rebuild the initial ledger from the first output
+        ledger0, energy0 = _initial({k: v[0] for k, v in traj.rec.items()})
     else:
         solver.start()
         traj = Trajectory()
         obs = solver.observe()
-        ledger0, energy0 = _ledger(obs), float(np.sum(obs["energy_media"]) + obs["energy_solid"])
+        ledger0, energy0 = _initial(obs)
         traj.record(solver.t, _guarded(obs, ledger0, energy0, guards, solver.t))
         traj.record_solid(solver.t, solver.solid_snapshot())
         start = 0

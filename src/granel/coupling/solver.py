@@ -140,11 +140,6 @@ class ModalSolver:
                 return
             if status == core.REBUILD:
                 self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
-            elif status == core.BALANCE_LOST:
-                raise SolverError(f"t = {st.clock[0]:.6e} s: the energy balance (13) drifted by more than {BALANCE_LIMIT:g} "
-                                  f"of the input energy with the error control at its smallest step "
-                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s): the results would be wrong. "
-                                  "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
             elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
                 raise SolverError(self._diagnosis(status))
 
@@ -257,10 +252,11 @@ class ExactSolver:
         dy = np.zeros_like(y)
         rhs(0.0, y, dy, self.stepper.model, self.stepper.still, 0.0)
         z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
+        ledger = self._ledger(y)
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
                                    y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr), Motion(zc(), zc(), zc(), zc()),
-                                   np.array([0.0, 0.0, 1e-4, 0.0, self._ledger(y), self._ledger(y),
+                                   np.array([0.0, 0.0, 1e-4, 0.0, ledger, ledger,
                                              float(max(0, min(level, self.cfg.levels)))]),
                                    np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
         self.t_out = 0.0
@@ -300,17 +296,19 @@ class ExactSolver:
                 trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
             if status == core.REBUILD:
                 self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
-            elif status == core.BALANCE_LOST:
-                raise SolverError(f"t = {st.clock[0]:.6e} s: the energy balance (13) drifted by more than {BALANCE_LIMIT:g} "
-                                  f"of the input energy with the error control at its smallest step "
-                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s): the results would be wrong. "
-                                  "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
-            elif status in (core.NO_CONVERGENCE, core.NON_FINITE):
-                what = "the granular state became non-finite" if status == core.NON_FINITE else \
-                    "Newton on the interface forces and slopes did not converge"
-                raise SolverError(f"t = {st.clock[0]:.6e} s: {what} even at the smallest step "
-                                  f"({self.cfg.h_max / 2 ** (self.cfg.levels / 4):.3e} s); lower k_s or raise simulation.max_halvings")
+            elif status in (core.BALANCE_LOST, core.NO_CONVERGENCE, core.NON_FINITE):
+                raise SolverError(self._diagnosis(status))
         self.t_out = target
+
+    def _diagnosis(self, status: int) -> str:
+        t, h_min = self.st.clock[0], self.cfg.h_max / 2 ** (self.cfg.levels / 4)
+        if status == core.BALANCE_LOST:
+            return (f"t = {t:.6e} s: the energy balance (13) drifted by more than {BALANCE_LIMIT:g} of the input energy "
+                    f"with the error control at its smallest step ({h_min:.3e} s): the results would be wrong. "
+                    "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
+        what = "the granular state became non-finite" if status == core.NON_FINITE else \
+            "Newton on the interface forces and slopes did not converge"
+        return f"t = {t:.6e} s: {what} even at the smallest step ({h_min:.3e} s); lower k_s or raise simulation.max_halvings"
 
     def _dense(self):
         """The state at the output time by dense output, computed once per output (observe and

@@ -14,7 +14,7 @@ from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
 from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
-from ..materials import effective_modulus
+from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
 from ..solid.beam import build_beam
@@ -141,12 +141,12 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             E2 = effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g])
             Ew = effective_modulus(system.E[g], system.nu[g])
             for (Es, Rs, ms) in ((E2, R / 2, m / 2), (Ew, R, m)):
-                A = 4.0 / 3.0 * Es * math.sqrt(Rs)
+                A = hertz_coefficient(Es, Rs)
                 if speed > 0:
-                    dmax = (5.0 * ms * speed**2 / (4.0 * A)) ** 0.4
+                    dmax = impact_overlap(ms, speed, A)
                     bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
                 if force > 0:  # a sustained load: the contact's period about the overlap it compresses to
-                    delta = (force / A) ** (2.0 / 3.0)
+                    delta = static_overlap(force, A)
                     bounds.append(2.0 * math.pi * math.sqrt(ms / (1.5 * A * math.sqrt(delta))) / 20.0)
     return min(bounds) if bounds else math.inf
 
@@ -190,6 +190,11 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     check_times(sc.simulation)
 
 
+def _wall_hertz(system, g) -> float:
+    """A of granule g against a rigid wall (E* = E/(1 - nu^2), R* = R), eq. (3)."""
+    return hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), system.radius[g])
+
+
 def check_load_overlaps(sc: Scenario, system) -> None:
     """Refuse loads and initial velocities that would drive a contact beyond
     simulation.overlap_limit of the radius, where Hertz contact (eq. 2) no longer holds: a force
@@ -198,9 +203,6 @@ def check_load_overlaps(sc: Scenario, system) -> None:
     (5 m v^2 / (4 A))^(2/5) (the wall is the stiffer contact: R* = R, m* = m)."""
     limit = sc.simulation.overlap_limit
 
-    def wall_A(g):
-        return 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g]) * math.sqrt(system.radius[g])
-
     def refuse(where, what, g, delta):
         raise ScenarioError(f"{where}: {what} would press granule {system.labels[g]} {delta / system.radius[g]:.1%} of its "
                             f"radius into a contact (limit simulation.overlap_limit = {limit:g}); Hertz contact (eq. 2) "
@@ -208,17 +210,18 @@ def check_load_overlaps(sc: Scenario, system) -> None:
 
     for k, e in enumerate(system.excitations):
         g, F, J = e.granule, e.history.peak(), e.history.peak_impulse()
-        if math.isfinite(F) and F > 0 and (F / wall_A(g)) ** (2.0 / 3.0) > limit * system.radius[g]:
-            refuse(f"excitations.{k}", f"a peak force of {F:.3e} N", g, (F / wall_A(g)) ** (2.0 / 3.0))
+        delta = static_overlap(F, _wall_hertz(system, g)) if math.isfinite(F) and F > 0 else 0.0
+        if delta > limit * system.radius[g]:
+            refuse(f"excitations.{k}", f"a peak force of {F:.3e} N", g, delta)
         if math.isfinite(J) and J > 0:
             v = J / system.mass[g]
-            delta = (5.0 * system.mass[g] * v * v / (4.0 * wall_A(g))) ** 0.4
+            delta = impact_overlap(system.mass[g], v, _wall_hertz(system, g))
             if delta > limit * system.radius[g]:
                 refuse(f"excitations.{k}", f"an impulse of {J:.3e} N s (speed {v:.3e} m/s)", g, delta)
     labels = list(system.labels)
     for k, iv in enumerate(sc.initial_velocities):
         g, v = labels.index(iv.granule), math.hypot(*iv.v)
-        delta = (5.0 * system.mass[g] * v * v / (4.0 * wall_A(g))) ** 0.4
+        delta = impact_overlap(system.mass[g], v, _wall_hertz(system, g))
         if delta > limit * system.radius[g]:
             refuse(f"initial_velocities.{k}", f"an initial speed of {v:.3e} m/s", g, delta)
 
@@ -242,8 +245,8 @@ def check_contact_rates(sc: Scenario, system) -> None:
     for k, iv in enumerate(sc.initial_velocities):
         g, v = labels.index(iv.granule), math.hypot(*iv.v)
         if v > 0:  # the peak force of a Hertz impact on a wall: A delta_max^(3/2)
-            A = 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g]) * math.sqrt(system.radius[g])
-            delta = (5.0 * system.mass[g] * v * v / (4.0 * A)) ** 0.4
+            A = _wall_hertz(system, g)
+            delta = impact_overlap(system.mass[g], v, A)
             pushed.append((g, A * delta**1.5, f"the impact at initial_velocities.{k}"))
     for g, F, what in pushed:
         if not (math.isfinite(F) and F > 0):
@@ -255,9 +258,9 @@ def check_contact_rates(sc: Scenario, system) -> None:
                                 f"sliding at {rate:.2e} 1/s, which needs about {1.5 * rate * dt / 2.0:.1e} RK4 sub-steps "
                                 f"per step dt = {dt:.3e} s (limit {MAX_SUBSTEPS}); lower contact.k_s (the paper: 100 s/m) "
                                 "or simulation.dt")
-        A = 4.0 / 3.0 * effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g]) * math.sqrt(system.radius[g] / 2)
+        A = hertz_coefficient(effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g]), system.radius[g] / 2)
         ms = m / 2.0
-        delta = (F / A) ** (2.0 / 3.0)
+        delta = static_overlap(F, A)
         decay = c.alpha_n * math.sqrt(A / ms) * delta**0.25
         if decay * dt > RK4_REAL_LIMIT:
             raise ScenarioError(f"contact.alpha_n = {c.alpha_n:g}: at {what} ({F:.3e} N) the contact damping (eq. 3) decays "
