@@ -136,6 +136,55 @@ class IterWork(NamedTuple):
     iface: InterfaceForces
 
 
+# ---------------------------------------------------------------- small dense systems
+
+
+@njit(cache=True)
+def lu_factor(A, n, piv):
+    """LU factorisation with partial pivoting of the leading n x n block of A, in place (the
+    interface systems are small: no allocation, no LAPACK call). False if A is singular."""
+    for k in range(n):
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                big = abs(A[i, k])
+                p = i
+        piv[k] = p
+        if big == 0.0:
+            return False
+        if p != k:
+            for j in range(n):
+                A[k, j], A[p, j] = A[p, j], A[k, j]
+        inv = 1.0 / A[k, k]
+        for i in range(k + 1, n):
+            f = A[i, k] * inv
+            A[i, k] = f
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    A[i, j] -= f * A[k, j]
+    return True
+
+
+@njit(cache=True)
+def lu_solve(A, n, piv, b):
+    """Solve (LU from `lu_factor`) x = b in place for the leading n entries of b."""
+    for k in range(n):
+        p = piv[k]
+        if p != k:
+            b[k], b[p] = b[p], b[k]
+    for i in range(n):
+        acc = b[i]
+        for j in range(i):
+            acc -= A[i, j] * b[j]
+        b[i] = acc
+    for i in range(n - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, n):
+            acc -= A[i, j] * b[j]
+        b[i] = acc / A[i, i]
+
+
 # ---------------------------------------------------------------- the interface iteration
 
 

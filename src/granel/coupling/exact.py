@@ -1,20 +1,30 @@
 """The exact modal integrator of the shared core (the fast method's solid integrator): each retained
-mode is propagated in closed form under an interface force that is a C1 cubic over the step, the
+mode is propagated in closed form under an interface force that is a polynomial over the step, the
 dropped high modes answer statically (residual flexibility), and the step size is error-controlled.
 
 Over a step [t0, t0 + h] the contact points' displacement is
     u(tau) = P eta(tau) + R F(tau),     eta_i'' + w_i^2 eta_i = (P' F(tau))_i,
 with P = B Phi over the retained modes (w_i <= w_cut) and R = B K^-1 B' - P W^-2 P' the static
-compliance of the dropped modes at the contacts. The force over the step is the cubic through the
-start value F0 and slope F0' (so the force history is C1), the force Fm at mid-step and the end
-force F1: in Hermite form its end slope is F1' = F0' + 4 (F0 + F1 - 2 Fm) / h. The unknowns are
-forces only, X = (F1, Fm): no slope comes from differentiating the stiff contact law.
-`solid.propagation` gives each mode's displacement and velocity per unit Hermite datum
-(F0, F0', F1, F1') at the step's end and at mid-step, so the contacts' end and mid-step motion is
-affine in X. The granules are integrated by RK4 under the cubic Hermite motion through
-(u0, w0, u1, w1); the map X -> G(X) returns the forces (eqs. 2, 5) at the end and at mid-step
-(the granular state there by cubic Hermite interpolation). Newton on X = G(X) uses the contact
-law's derivatives (the granules' sensitivity neglected, the paper's Assumption 3).
+compliance of the dropped modes at the contacts. The force over the step is the Lagrange
+polynomial through its values at the nodes s_b h: the start value F0 (known) and the unknowns X,
+the forces at the other nodes. Two force models:
+  quadratic  nodes (0, 1/2, 1): the collocation points of the granules' RK4, so the solid feels a
+             force that agrees with the one the granules feel at every RK4 stage; the energy the
+             two sides exchange then agrees to the order of Simpson's rule (default);
+  linear     nodes (0, 1): the force taken as linear over the step (second order; for the
+             convergence studies).
+A force polynomial carries no memory from step to step: a contact that opens has F = 0 at every
+node and exerts nothing (a C1 cubic whose start slope is inherited from the previous step kept
+the slope of a contact's last loaded step after it opened, pushing and pulling the solid through
+an open contact; that broke Newton and leaked energy).
+
+`solid.propagation` gives each mode's displacement and velocity per unit force datum at each
+node, so the contacts' motion at the nodes is affine in X. The granules are integrated by RK4 under
+the cubic Hermite motion through the contacts' exact start and end displacements and velocities;
+the map X -> G(X) returns the contact law's forces (eqs. 2, 5) at the nodes, the granular state at
+an interior node by cubic Hermite interpolation of the step's ends and derivatives. Newton on
+X = G(X) uses the contact law's derivatives, with each contact granule's own response to leading
+order.
 
 Local error of the whole coupled step: the embedded third-order solution of classical RK4 with the
 end-of-step derivative (FSAL weights (1, 2, 2, 0, 1)/6, err = h/6 (k4 - k5) per RK4 sub-step) on
@@ -34,40 +44,59 @@ from numba import njit
 
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope
-from ..granular.kernels import friction_rate, granule_energies, interface_forces, moved_beyond, rhs, rk4_step, rk4_substepped
-from ..solid.propagation import hermite_taylor, hermite_values, weights_at
+from ..granular.kernels import (friction_rate, granule_energies, interface_forces, moved_beyond, overlaps, rhs, rk4_step,
+                                rk4_substepped)
+from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
 GRID_PER_OCTAVE = 4
+# force models over a step: the data (derivative order at node s h); the first `known` data come
+# from the step's start, the others are the unknowns, one force value per node
+FORCE_MODELS = {"linear": ((0.0, 1.0), (0, 0), 1), "quadratic": ((0.0, 0.5, 1.0), (0, 0, 0), 1),
+                "cubic": ((0.0, 0.0, 0.5, 1.0), (0, 1, 0, 0), 2)}
 
 
 class ExactSolid(NamedTuple):
-    """Retained modes (omega, P = B Phi: (2nc, nr)), the residual compliance R (2nc, 2nc) of the
-    dropped ones, and the contacts' frame."""
+    """The solid's modes as the integrator propagates them (the retained eigenmodes, then the
+    residual modes of the dropped ones: `coupling.solver.residual_modes`): omega (nr,), the
+    contacts' modal matrix P = B Phi (2nc, nr), and the contacts' frame."""
 
     omega: np.ndarray
     P: np.ndarray
-    R: np.ndarray
     frame: core.ContactFrame
 
 
 class OpsCache(NamedTuple):
-    """Per step size h (grid level k: h_max 2^(-k/4); the last slot for an off-grid step cut at a
-    load's kink), computed on first use: the modal weights at the end (hom (nr, 3) = (S0, h S1,
-    -w^2 h S1), wd, wv (nr, 4): displacement and velocity per unit modal Hermite datum) and at
-    mid-step (homm), and the contact operators at the end (Cu, Cw) and at mid-step (Cum, Cwm),
-    (4, 2nc, 2nc) each: the contacts' displacement and velocity per unit Hermite datum, the
-    residual compliance included."""
+    """The force model (`FORCE_MODELS`: its data are derivative orders[b] at nodes[b] h, the first
+    `known` of them from the step's start, the others the forces at the unknown nodes, the last at
+    the step's end) and, per step size h (grid level k: h_max 2^(-k/4); the last slot for an
+    off-grid step cut at a load's kink), computed on first use: the basis's Taylor rows T, the
+    modes' free-response weights at each unknown node (hom), their end displacement and velocity
+    per unit modal datum (wd, wv), and the contacts' displacement and velocity at each unknown node
+    j per unit force datum b (Cu, Cw), the residual compliance included."""
 
+    nodes: np.ndarray  # (nb,)
+    orders: np.ndarray  # (nb,) int
+    known: int
     ready: np.ndarray  # (L+1,) bool
-    hom: np.ndarray  # (L+1, nr, 3)
-    wd: np.ndarray  # (L+1, nr, 4)
+    T: np.ndarray  # (L+1, nb, 4)
+    hom: np.ndarray  # (L+1, nn, nr, 3)
+    wd: np.ndarray  # (L+1, nr, nb)
     wv: np.ndarray
-    homm: np.ndarray  # (L+1, nr, 3)
-    Cu: np.ndarray  # (L+1, 4, 2nc, 2nc)
+    Cu: np.ndarray  # (L+1, nn, nb, 2nc, 2nc)
     Cw: np.ndarray
-    Cum: np.ndarray
-    Cwm: np.ndarray
+    I1: np.ndarray  # (L+1, nn, nb): the basis's integral from 0 to each unknown node ...
+    I2: np.ndarray  # ... and its double integral
+
+
+def ops_cache(model: str, levels: int, nr: int, nc: int) -> OpsCache:
+    """An empty operator cache of a force model for `levels` grid levels plus the off-grid slot."""
+    nodes, orders, known = FORCE_MODELS[model]
+    nb, L, m2 = len(nodes), levels + 2, 2 * nc
+    nn = nb - known
+    return OpsCache(np.asarray(nodes, float), np.asarray(orders, np.int64), int(known), np.zeros(L, bool),
+                    np.zeros((L, nb, 4)), np.zeros((L, nn, nr, 3)), np.zeros((L, nr, nb)), np.zeros((L, nr, nb)),
+                    np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb)), np.zeros((L, nn, nb)))
 
 
 class ExactConfig(NamedTuple):
@@ -89,12 +118,14 @@ class ExactConfig(NamedTuple):
 
 
 class ExactState(NamedTuple):
-    """The state at the current time (y, modal eta/eta', the interface force F and slope Fd and
-    their modal projections qF = P'F, qFd = P'Fd, the contacts' displacement u and velocity w,
-    |N|, v_t, the granules' derivative dy) and, for dense output, the same at
-    the previous step's start (suffix 0). clock = [t, t0, err_prev, friction rate of the last
-    step, energy ledger (13), its initial value, the controller's continuous level]; meta = [grid
-    level of the next step, rejected]."""
+    """The state at the current time: y, the granules' derivative dy, the modes (eta, eta'), the
+    interface force F on the solid (nc, 2) and its slope Fd, their modal projections q = P'F and
+    qd = P'Fd, the contacts' displacement u (2nc,) and the retained modes' part of their velocity
+    w = P eta' (the dropped modes add R F'), |N| and v_t; and the last step, for dense output and
+    the next step's predictor: its start (suffix 0), its force data Fs (nb, nc, 2) with their
+    projections qs (nb, nr) and basis Ts (nb, 4), and the contacts' motion over it. clock = [t,
+    t0, err_prev, friction rate of the last step, energy ledger (13), its initial value, the
+    controller's continuous level]; meta = [grid level of the next step, rejected]."""
 
     y: np.ndarray
     dy: np.ndarray
@@ -102,8 +133,8 @@ class ExactState(NamedTuple):
     etad: np.ndarray
     F: np.ndarray
     Fd: np.ndarray
-    qF: np.ndarray
-    qFd: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
     u: np.ndarray
     w: np.ndarray
     normal: np.ndarray
@@ -112,13 +143,21 @@ class ExactState(NamedTuple):
     dy0: np.ndarray
     eta0: np.ndarray
     etad0: np.ndarray
-    F0: np.ndarray
-    Fd0: np.ndarray
-    qF0: np.ndarray
-    qFd0: np.ndarray
-    step_motion: Motion  # the contacts' motion in the last step (for dense output)
+    Fs: np.ndarray
+    qs: np.ndarray
+    Ts: np.ndarray
+    step_motion: Motion
     clock: np.ndarray
     meta: np.ndarray
+
+
+def initial_state(y, dy, nr: int, nc: int, nb: int, ledger: float, level: int) -> ExactState:
+    """The state at t = 0: the solid at rest, no interface force."""
+    z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
+    return ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), dy.copy(),
+                      z(nr), z(nr), np.zeros((nb, nc, 2)), np.zeros((nb, nr)), np.zeros((nb, 4)),
+                      Motion(zc(), zc(), zc(), zc(), zc(), zc()),
+                      np.array([0.0, 0.0, 1e-4, 0.0, ledger, ledger, float(level)]), np.array([level, 0], np.int64))
 
 
 class Work(NamedTuple):
@@ -126,41 +165,69 @@ class Work(NamedTuple):
     rk4: np.ndarray  # (5, len(y))
     k5: np.ndarray
     err: np.ndarray  # embedded error of the granular state
-    ymid: np.ndarray  # the granular state at mid-step
+    ynode: np.ndarray  # the granular state at an interior node
     motion: Motion
-    u1: np.ndarray  # (2nc,) the contacts at the end ...
-    w1: np.ndarray
-    um: np.ndarray  # ... and at mid-step
-    wm: np.ndarray
-    uf: np.ndarray  # their free parts (no force data)
+    un: np.ndarray  # (nn, 2nc) the contacts at the unknown nodes ...
+    wn: np.ndarray
+    uf: np.ndarray  # ... and their free parts (no force data)
     wf: np.ndarray
-    umf: np.ndarray
-    wmf: np.ndarray
-    Fd1: np.ndarray  # (2nc,) the end slope the unknowns imply
-    X: np.ndarray  # (4nc,) unknowns (F1, Fm) flat
-    G: np.ndarray  # (4nc,)
-    J: np.ndarray  # (4nc, 4nc)
+    D: np.ndarray  # (nb, 2nc) the step's force data
+    k1: np.ndarray  # the granules' derivative at the step's start (RK4's first stage)
+    X: np.ndarray  # (nn 2nc,) unknowns: the forces at the unknown nodes, node-major
+    Xprev: np.ndarray  # before the last Newton step
+    G: np.ndarray
+    J: np.ndarray  # (nn 2nc, nn 2nc)
     r: np.ndarray
-    iface: InterfaceForces  # at the end
-    iface_m: InterfaceForces  # at mid-step
-    ww: np.ndarray  # (nr,) modal scratch
+    iface0: InterfaceForces  # at the first unknown node ...
+    iface1: InterfaceForces  # ... and at the second (quadratic model)
+    ww: np.ndarray  # (nr, 2 nn) modal scratch
     rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
     parts: np.ndarray  # (2,): the last step's scaled velocity error and energy-ledger defect
-    qF1: np.ndarray  # (nr,): P' F1 and P' F1' of the trial step
-    qFd1: np.ndarray
+    qdat: np.ndarray  # (nb, nr): the modal force data of the trial step (P'F, P'Fd known; P' X)
+    eta1: np.ndarray  # (nr,): the modes at the trial step's end
+    etad1: np.ndarray
     inv_m: np.ndarray  # (nc,): 1/m and R^2/I of each contact's granule
     spin: np.ndarray
+    # Newton's scratch: the step, the touching contacts' system and each contact's local problems
+    dX: np.ndarray
+    touching: np.ndarray  # (nc,) bool
+    idx: np.ndarray  # (nn 2nc,) int: the touching unknowns
+    na: np.ndarray  # (1,) int: their count
+    piv: np.ndarray
+    pivA: np.ndarray
+    Ma: np.ndarray
+    rhs_a: np.ndarray
+    A: np.ndarray  # (2nn, 2nn)
+    Ai: np.ndarray
+    rows: np.ndarray  # (2nn, nn 2nc)
+    col: np.ndarray
+    ls: np.ndarray  # (nn,) local friction problem
+    ls0: np.ndarray
+    lvt: np.ndarray
+    lN: np.ndarray
+    lB: np.ndarray
+    lr: np.ndarray
+    lJ: np.ndarray
 
 
 @njit(cache=True)
-def work_for(y, nc, nr):
+def work_for(y, nc, nr, nb, nn):
     m2 = 2 * nc
-    z = np.zeros(m2)
+    n = nn * m2
     return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
-                motion_buffers(nc), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
-                np.zeros(2 * m2), np.zeros(2 * m2), np.zeros((2 * m2, 2 * m2)), np.zeros(2 * m2), interface_buffers(nc),
-                interface_buffers(nc), np.zeros(nr), np.zeros(1), np.zeros(2), np.zeros(nr), np.zeros(nr), np.zeros(nc),
-                np.zeros(nc))
+                motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)),
+                np.zeros((nb, m2)), np.empty_like(y), np.zeros(nn * m2), np.zeros(nn * m2), np.zeros(nn * m2), np.zeros((nn * m2, nn * m2)), np.zeros(nn * m2), interface_buffers(nc),
+                interface_buffers(nc), np.zeros((nr, 2 * nn)), np.zeros(1), np.zeros(2), np.zeros((nb, nr)), np.zeros(nr), np.zeros(nr),
+                np.zeros(nc), np.zeros(nc), np.zeros(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.int64),
+                np.zeros(n, np.int64),
+                np.zeros((n, n)), np.zeros(n), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), np.zeros(2 * nn),
+                np.zeros(nn), np.zeros(nn), np.zeros(nn), np.zeros(nn), np.zeros((nn, nn)), np.zeros(2), np.zeros((2, 2)))
+
+
+@njit(cache=True, inline="always")
+def node_iface(w, j):
+    """The interface-force buffer of unknown node j."""
+    return w.iface0 if j == 0 else w.iface1
 
 
 # ---------------------------------------------------------------- per-step operators
@@ -168,92 +235,165 @@ def work_for(y, nc, nr):
 
 @njit(cache=True)
 def _contact_operator(P, weight, out):
-    """out = P diag(weight) P'."""
-    m2 = P.shape[0]
-    for a in range(m2):
-        for b in range(a, m2):
-            acc = 0.0
-            for i in range(P.shape[1]):
-                acc += P[a, i] * weight[i] * P[b, i]
-            out[a, b] = acc
-            out[b, a] = acc
-
-
-@njit(cache=True)
-def _operators_at(solid, h, tau, hom, Cu, Cw):
-    """Modal free-response weights at tau into a step h, and the contacts' displacement and
-    velocity there per unit Hermite datum (4, 2nc, 2nc), the residual part R F(tau) included."""
-    omega, P, R = solid.omega, solid.P, solid.R
-    nr = omega.shape[0]
-    m2 = P.shape[0]
-    wd, wv, wa = np.empty((nr, 4)), np.empty((nr, 4)), np.empty((nr, 4))
-    weights_at(omega, h, tau, hom, wd, wv, wa)
-    col = np.empty(nr)
-    for b in range(4):
-        for i in range(nr):
-            col[i] = wd[i, b]
-        _contact_operator(P, col, Cu[b])
-        for i in range(nr):
-            col[i] = wv[i, b]
-        _contact_operator(P, col, Cw[b])
-    T, hb, dhb = np.empty((4, 4)), np.empty(4), np.empty(4)
-    hermite_taylor(h, T)
-    hermite_values(T, tau, hb, dhb)
-    for b in range(4):
-        for r in range(m2):
-            for q in range(m2):
-                Cu[b, r, q] += hb[b] * R[r, q]
-                Cw[b, r, q] += dhb[b] * R[r, q]
-    return wd, wv
+    """out = P diag(weight) P' (a matrix product: BLAS)."""
+    out[:, :] = np.dot(P * weight, P.T)
 
 
 @njit(cache=True)
 def ensure_ops(cache, solid, slot, h):
-    """Fill `cache` slot `slot` for step size h (once per grid level; always for the off-grid slot)."""
+    """Fill `cache` slot `slot` for step size h (once per grid level; always for the off-grid slot):
+    per unknown node j at tau_j the modes' free response and the contacts' displacement and
+    velocity per unit force datum, P diag(wd_b) P' + H_b(tau_j) R (the dropped modes follow the
+    force statically), and the modes' end weights."""
     if cache.ready[slot]:
         return
-    wd, wv = _operators_at(solid, h, h, cache.hom[slot], cache.Cu[slot], cache.Cw[slot])
-    cache.wd[slot, :, :] = wd
+    omega, P = solid.omega, solid.P
+    nodes, k0 = cache.nodes, cache.known
+    nb = nodes.shape[0]
+    nr = omega.shape[0]
+    m2 = P.shape[0]
+    T = cache.T[slot]
+    interpolation_taylor(nodes, cache.orders, h, T)
+    wd, wv = np.empty((nr, nb)), np.empty((nr, nb))
+    H, dH = np.empty(nb), np.empty(nb)
+    col = np.empty(nr)
+    for j in range(nb - k0):
+        tau = nodes[k0 + j] * h
+        weights_at(omega, tau, T, cache.hom[slot, j], wd, wv)
+        basis_values(T, tau, H, dH)
+        for b in range(nb):
+            i1 = 0.0
+            i2 = 0.0
+            fact = 1.0
+            for k in range(4):  # int_0^tau H_b = sum_k T[b, k] tau^(k+1) / (k+1)!, and the double integral
+                fact *= k + 1
+                i1 += T[b, k] * tau ** (k + 1) / fact
+                i2 += T[b, k] * tau ** (k + 2) / (fact * (k + 2))
+            cache.I1[slot, j, b] = i1
+            cache.I2[slot, j, b] = i2
+            for i in range(nr):
+                col[i] = wd[i, b]
+            _contact_operator(P, col, cache.Cu[slot, j, b])
+            for i in range(nr):
+                col[i] = wv[i, b]
+            _contact_operator(P, col, cache.Cw[slot, j, b])
+    cache.wd[slot, :, :] = wd  # the last node is the step's end
     cache.wv[slot, :, :] = wv
-    _operators_at(solid, h, 0.5 * h, cache.homm[slot], cache.Cum[slot], cache.Cwm[slot])
     cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
+
+
+@njit(cache=True)
+def free_response(st, solid, cache, slot, w):
+    """The contacts' displacement and velocity at each unknown node with no force data (w.uf,
+    w.wf): P applied to the modes' free response."""
+    nr = st.eta.shape[0]
+    nn = cache.nodes.shape[0] - cache.known
+    if nr == 0:
+        w.uf[:, :] = 0.0
+        w.wf[:, :] = 0.0
+        _known_share(st, cache, slot, w)
+        return
+    ww = w.ww
+    for j in range(nn):
+        hom = cache.hom[slot, j]
+        for i in range(nr):
+            ww[i, 2 * j] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
+            ww[i, 2 * j + 1] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
+    out = np.dot(solid.P, ww)
+    for j in range(nn):
+        w.uf[j, :] = out[:, 2 * j]
+        w.wf[j, :] = out[:, 2 * j + 1]
+    _known_share(st, cache, slot, w)
+
+
+@njit(cache=True)
+def _known_share(st, cache, slot, w):
+    """Add the known force data's share (start force, and slope) to the contacts' free motion at
+    the unknown nodes: it does not change over the step's iterations."""
+    m2 = st.u.shape[0]
+    k0 = cache.known
+    nn = cache.nodes.shape[0] - k0
+    for j in range(nn):
+        Cu, Cw = cache.Cu[slot, j], cache.Cw[slot, j]
+        for b in range(k0):
+            for r in range(m2):
+                u = 0.0
+                v = 0.0
+                for q in range(m2):
+                    x = st.F[q // 2, q % 2] if b == 0 else st.Fd[q // 2, q % 2]
+                    u += Cu[b, r, q] * x
+                    v += Cw[b, r, q] * x
+                w.uf[j, r] += u
+                w.wf[j, r] += v
+
+
+@njit(cache=True)
+def gather_data(st, X, known, D):
+    """D (nb, 2nc): the step's force data, the known ones from the start (force, and slope for the
+    C1 model) and the unknown nodes' forces X."""
+    m2 = st.u.shape[0]
+    for r in range(m2):
+        D[0, r] = st.F[r // 2, r % 2]
+        if known > 1:
+            D[1, r] = st.Fd[r // 2, r % 2]
+    for b in range(known, D.shape[0]):
+        for r in range(m2):
+            D[b, r] = X[(b - known) * m2 + r]
 
 
 # ---------------------------------------------------------------- the interface map
 
 
 @njit(cache=True)
-def _motion_and_ends(st, cache, slot, h, w):
-    """For the unknowns w.X = (F1, Fm): the end slope F1' = F0' + 4 (F0 + F1 - 2 Fm) / h, the
-    contacts' displacement and velocity at the end and at mid-step, and the cubic Hermite motion
-    through (u0, w0, u1, w1) for the RK4 of the granules."""
+def _motion_at_nodes(st, solid, cache, slot, h, w):
+    """For the unknowns w.X: the contacts' displacement and velocity at every unknown node (affine
+    in the force data), and the motion the granules' RK4 sees: the polynomial through the exact
+    displacements and velocities at the start and at every node, so that the forces at the nodes
+    are the ones the granules feel there. The start velocity is the modes' plus the dropped modes'
+    R F'(0) of this step's force (the force's slope may jump between steps)."""
     m2 = st.u.shape[0]
-    X = w.X
-    for q in range(m2):
-        w.Fd1[q] = st.Fd[q // 2, q % 2] + 4.0 * (st.F[q // 2, q % 2] + X[q] - 2.0 * X[m2 + q]) / h
+    nb, k0 = cache.nodes.shape[0], cache.known
+    nn = nb - k0
+    D = w.D
+    gather_data(st, w.X, k0, D)
+    for j in range(nn):  # the known data's share is in uf, wf (`free_response`)
+        Cu, Cw = cache.Cu[slot, j], cache.Cw[slot, j]
+        for r in range(m2):
+            u = w.uf[j, r]
+            v = w.wf[j, r]
+            for b in range(k0, nb):
+                for q in range(m2):
+                    if D[b, q] != 0.0:
+                        u += Cu[b, r, q] * D[b, q]
+                        v += Cw[b, r, q] * D[b, q]
+            w.un[j, r] = u
+            w.wn[j, r] = v
+    e = nn - 1
     for r in range(m2):
-        u1, w1, um, wm = w.uf[r], w.wf[r], w.umf[r], w.wmf[r]
-        for q in range(m2):
-            data0 = st.F[q // 2, q % 2]
-            data1 = st.Fd[q // 2, q % 2]
-            u1 += cache.Cu[slot, 0, r, q] * data0 + cache.Cu[slot, 1, r, q] * data1 + cache.Cu[slot, 2, r, q] * X[q] \
-                + cache.Cu[slot, 3, r, q] * w.Fd1[q]
-            w1 += cache.Cw[slot, 0, r, q] * data0 + cache.Cw[slot, 1, r, q] * data1 + cache.Cw[slot, 2, r, q] * X[q] \
-                + cache.Cw[slot, 3, r, q] * w.Fd1[q]
-            um += cache.Cum[slot, 0, r, q] * data0 + cache.Cum[slot, 1, r, q] * data1 + cache.Cum[slot, 2, r, q] * X[q] \
-                + cache.Cum[slot, 3, r, q] * w.Fd1[q]
-            wm += cache.Cwm[slot, 0, r, q] * data0 + cache.Cwm[slot, 1, r, q] * data1 + cache.Cwm[slot, 2, r, q] * X[q] \
-                + cache.Cwm[slot, 3, r, q] * w.Fd1[q]
-        w.u1[r], w.w1[r], w.um[r], w.wm[r] = u1, w1, um, wm
         c = r // 2
         d = r % 2
-        u0, v0 = st.u[r], st.w[r]
+        u0, v0, u1, w1 = st.u[r], st.w[r], w.un[e, r], w.wn[e, r]
         c2 = (3.0 * (u1 - u0) / h - 2.0 * v0 - w1) / h
         c3 = (2.0 * (u0 - u1) / h + v0 + w1) / (h * h)
+        c4 = c5 = 0.0
+        if nn == 2:
+            # through the mid-step node too: add tau^2 (tau - h)^2 (al + be tau), which leaves the
+            # ends alone and meets the exact displacement and velocity at h/2 (a quintic)
+            hh = 0.5 * h
+            du = w.un[0, r] - (u0 + (v0 + (c2 + c3 * hh) * hh) * hh)
+            dw = w.wn[0, r] - (v0 + (2.0 * c2 + 3.0 * c3 * hh) * hh)
+            be = 16.0 * dw / h**4
+            al = 16.0 * du / h**4 - be * hh
+            c2 += al * h * h
+            c3 += be * h * h - 2.0 * h * al
+            c4 = al - 2.0 * h * be
+            c5 = be
         w.motion.u0[c, d] = u0
         w.motion.v0[c, d] = v0
         w.motion.a[c, d] = 2.0 * c2
         w.motion.j[c, d] = 6.0 * c3
+        w.motion.d4[c, d] = 24.0 * c4
+        w.motion.d5[c, d] = 120.0 * c5
 
 
 @njit(cache=True)
@@ -269,6 +409,8 @@ def _rk4_with_estimate(y, t, h, model, motion, rate, w):
     for k in range(m):
         if not rk4_step(w.ytr, t + k * s, s, model, motion, k * s, w.rk4):
             return False
+        if k == 0:
+            w.k1[:] = w.rk4[0]
         rhs(t + (k + 1) * s, w.ytr, w.k5, model, motion, (k + 1) * s)
         k4 = w.rk4[3]
         for q in range(n):
@@ -277,109 +419,285 @@ def _rk4_with_estimate(y, t, h, model, motion, rate, w):
 
 
 @njit(cache=True)
-def hermite_map(st, t, h, model, cache, slot, rate, w, derivatives):
-    """X = (F1, Fm) -> G(X): the forces at the step's end and at mid-step after RK4 of the
-    granules under the contacts' motion that X implies. Fills w.G, w.iface, w.iface_m (with the
-    law's derivatives if asked), w.ytr, w.k5, w.err. False if the granular state stopped being
-    finite."""
-    _motion_and_ends(st, cache, slot, h, w)
+def force_map(st, t, h, model, solid, cache, slot, rate, w, derivatives):
+    """X -> G(X): the forces at the unknown nodes after RK4 of the granules under the contacts'
+    motion that X implies. Fills w.G, the nodes' interface buffers (with the law's derivatives if
+    asked), w.ytr, w.k5, w.err. False if the granular state stopped being finite."""
+    _motion_at_nodes(st, solid, cache, slot, h, w)
     if not _rk4_with_estimate(st.y, t, h, model, w.motion, rate, w):
         return False
     nc = st.F.shape[0]
     m2 = 2 * nc
-    # the granules at mid-step: the cubic Hermite through the step's ends and their derivatives
-    # (fourth-order locally; the end derivative w.k5 comes with the RK4's error estimate)
-    for q in range(w.ymid.shape[0]):
-        w.ymid[q] = 0.5 * (st.y[q] + w.ytr[q]) + 0.125 * h * (st.dy[q] - w.k5[q])
-    interface_forces(w.ytr, model, w.u1.reshape(nc, 2), w.w1.reshape(nc, 2), w.iface, derivatives)
-    interface_forces(w.ymid, model, w.um.reshape(nc, 2), w.wm.reshape(nc, 2), w.iface_m, derivatives)
-    for r in range(m2):
-        w.G[r] = w.iface.F[r // 2, r % 2]
-        w.G[m2 + r] = w.iface_m.F[r // 2, r % 2]
+    nodes, k0 = cache.nodes, cache.known
+    for j in range(nodes.shape[0] - k0):
+        s = nodes[k0 + j]
+        yj = w.ytr
+        if s < 1.0:
+            # the granules at an interior node: the cubic Hermite through the step's ends and their
+            # derivatives (fourth order locally; the end derivative comes with the error estimate)
+            h00, h10 = (2.0 * s - 3.0) * s * s + 1.0, ((s - 2.0) * s + 1.0) * s * h
+            h01, h11 = (3.0 - 2.0 * s) * s * s, (s - 1.0) * s * s * h
+            for q in range(w.ynode.shape[0]):
+                w.ynode[q] = h00 * st.y[q] + h10 * w.k1[q] + h01 * w.ytr[q] + h11 * w.k5[q]
+            yj = w.ynode
+        iface = node_iface(w, j)
+        interface_forces(yj, model, w.un[j].reshape(nc, 2), w.wn[j].reshape(nc, 2), iface, derivatives)
+        for r in range(m2):
+            w.G[j * m2 + r] = iface.F[r // 2, r % 2]
     return True
 
 
 @njit(cache=True)
-def _jacobian_rows(J, row0, Du, Dw, Cu, Cw, h, tau, inv_m, spin, tangent):
-    """Rows row0.. of J = dG/dX for one evaluation point at tau into the step (end or mid-step):
-    the forces there move with the point's displacement (Du) and velocity (Dw), which move with F1
-    directly (Hermite datum 2) and through the slope F1' (datum 3, dF1'/dF1 = 4/h, dF1'/dFm =
-    -8/h). The granule's own response is kept to leading order: a force change ramping up over the
-    step moves it by -M^-1 dG tau^2/6 and changes its velocity by -M^-1 dG tau/2, so each contact's
-    2x2 block is premultiplied by (I - (Du tau^2/6 + Dw tau/2) M^-1)^-1, with M^-1 = I/m + t t' R^2/I
-    (the spin carries the tangential part); the paper's Assumption 3 drops this where the granules
-    are heavy against the solid's compliance, and it matters where friction is stiff."""
+def _jacobian_rows(M, rows, c, iface, Cu, Cw, known):
+    """Contact c's two rows (at rows, rows + 1) of M = -dG/dX at fixed granules for one unknown
+    node: its forces move with the node's displacement (Du) and velocity (Dw), which move with
+    each unknown force datum b through Cu[b], Cw[b]."""
     m2 = Cu.shape[1]
-    Mi, A, Ai = np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2))
-    row2, row3 = np.empty(2), np.empty(2)
-    for c in range(m2 // 2):
-        # A = I - (Du tau^2 / 6 + Dw tau / 2) Minv, and its inverse
-        tx, ty = tangent[c, 0], tangent[c, 1]
-        Mi[0, 0] = inv_m[c] + spin[c] * tx * tx
-        Mi[0, 1] = spin[c] * tx * ty
-        Mi[1, 0] = Mi[0, 1]
-        Mi[1, 1] = inv_m[c] + spin[c] * ty * ty
-        for a in range(2):
-            for b in range(2):
-                acc = 0.0
-                for k in range(2):
-                    acc += (Du[c, a, k] * tau * tau / 6.0 + Dw[c, a, k] * 0.5 * tau) * Mi[k, b]
-                A[a, b] = (1.0 if a == b else 0.0) - acc
-        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        Ai[0, 0], Ai[0, 1], Ai[1, 0], Ai[1, 1] = A[1, 1] / det, -A[0, 1] / det, -A[1, 0] / det, A[0, 0] / det
+    nb = Cu.shape[0]
+    Du, Dw = iface.Du, iface.Dw
+    for b in range(known, nb):
+        col0 = (b - known) * m2
         for q in range(m2):
             for d in range(2):
-                row2[d] = Du[c, d, 0] * Cu[2, 2 * c, q] + Du[c, d, 1] * Cu[2, 2 * c + 1, q] \
-                    + Dw[c, d, 0] * Cw[2, 2 * c, q] + Dw[c, d, 1] * Cw[2, 2 * c + 1, q]
-                row3[d] = Du[c, d, 0] * Cu[3, 2 * c, q] + Du[c, d, 1] * Cu[3, 2 * c + 1, q] \
-                    + Dw[c, d, 0] * Cw[3, 2 * c, q] + Dw[c, d, 1] * Cw[3, 2 * c + 1, q]
-            for d in range(2):
-                u2 = Ai[d, 0] * row2[0] + Ai[d, 1] * row2[1]
-                u3 = Ai[d, 0] * row3[0] + Ai[d, 1] * row3[1]
-                J[row0 + 2 * c + d, q] = -(u2 + 4.0 / h * u3)
-                J[row0 + 2 * c + d, m2 + q] = 8.0 / h * u3
+                M[rows + d, col0 + q] = -(Du[c, d, 0] * Cu[b, 2 * c, q] + Du[c, d, 1] * Cu[b, 2 * c + 1, q]
+                                          + Dw[c, d, 0] * Cw[b, 2 * c, q] + Dw[c, d, 1] * Cw[b, 2 * c + 1, q])
 
 
 @njit(cache=True)
-def _newton_step(w, cache, slot, h, frame, law):
-    """X <- X + dX with M dX = G - X, M ~ d(X - G)/dX from the contact law's derivatives
-    (`_jacobian_rows`); then the exact local friction root for the end force where the friction
-    map is not contractive (the tangential velocity response to F1 at fixed Fm). (A Broyden
-    update of M between iterations was tried: more iterations, 6.5 against 5.3 on average.)"""
-    m2 = w.u1.shape[0]
+def _granule_response(w, cache, slot, c, tangent, A):
+    """(I - Dg) for contact c over its unknown nodes (2nn x 2nn): the contact granule feels the
+    opposite of the force change, sum_b H_b(tau) dG_b, so at node j it has moved by
+    -sum_b I2_jb dG_b / m and its contact velocity has changed by -sum_b M^-1 I1_jb dG_b (I1, I2:
+    the basis's first and second integrals from the step's start; M^-1 = I/m + t t' R^2/I, the spin
+    carrying the tangential part), which changes the forces by Dg dG. The granule's other
+    contacts are left out (the paper's Assumption 3 drops the whole response)."""
+    k0 = cache.known
+    nn = cache.nodes.shape[0] - k0
+    tx, ty = tangent[c, 0], tangent[c, 1]
+    im, sp = w.inv_m[c], w.spin[c]
+    Mi00, Mi01, Mi11 = im + sp * tx * tx, sp * tx * ty, im + sp * ty * ty
+    for j in range(nn):
+        iface = node_iface(w, j)
+        Du, Dw = iface.Du, iface.Dw
+        for b in range(nn):
+            i1, i2 = cache.I1[slot, j, k0 + b], cache.I2[slot, j, k0 + b]
+            for d in range(2):
+                g0 = Du[c, d, 0] * im * i2 + (Dw[c, d, 0] * Mi00 + Dw[c, d, 1] * Mi01) * i1
+                g1 = Du[c, d, 1] * im * i2 + (Dw[c, d, 0] * Mi01 + Dw[c, d, 1] * Mi11) * i1
+                A[2 * j + d, 2 * b] = (1.0 if (j == b and d == 0) else 0.0) - g0
+                A[2 * j + d, 2 * b + 1] = (1.0 if (j == b and d == 1) else 0.0) - g1
+
+
+@njit(cache=True)
+def local_friction_solve(s, s0, vt0, normal, B, law, r, Jl):
+    """The tangential forces s (nn,) at a contact's unknown nodes that its local friction model
+    holds fixed: s_j = mu N_j tanh(k_s vt_j), vt_j = vt0_j - sum_b B_jb (s_b - s0_b), B the
+    tangential velocity's response to the tangential forces (solid and granule); s comes in as the
+    Newton update and leaves as the root (damped Newton, each s_j within +-mu N_j). Where the tanh
+    is steep, Newton's linear model overshoots it; this keeps the nodes' coupling that a root for
+    one node at a time would break."""
+    nn = s.shape[0]
+    mu, ks = law.mu, law.k_s
+
+    def resid(s, out):
+        total = 0.0
+        for j in range(nn):
+            vt = vt0[j]
+            for b in range(nn):
+                vt -= B[j, b] * (s[b] - s0[b])
+            out[j] = s[j] - mu * normal[j] * math.tanh(ks * vt)
+            total += out[j] * out[j]
+        return total
+
+    trial = np.empty(2)
+    rt = np.empty(2)
+    norm = resid(s, r)
+    scale = 0.0
+    for j in range(nn):
+        scale = max(scale, mu * normal[j])
+    for _ in range(60):
+        if norm <= (1e-13 * scale) ** 2:
+            return
+        for j in range(nn):
+            vt = vt0[j]
+            for b in range(nn):
+                vt -= B[j, b] * (s[b] - s0[b])
+            th = math.tanh(ks * vt)
+            g = mu * normal[j] * ks * (1.0 - th * th)
+            for b in range(nn):
+                Jl[j, b] = (1.0 if j == b else 0.0) + g * B[j, b]
+        if nn == 1:
+            ds0, ds1 = r[0] / Jl[0, 0], 0.0
+        else:
+            det = Jl[0, 0] * Jl[1, 1] - Jl[0, 1] * Jl[1, 0]
+            ds0 = (Jl[1, 1] * r[0] - Jl[0, 1] * r[1]) / det
+            ds1 = (Jl[0, 0] * r[1] - Jl[1, 0] * r[0]) / det
+        lam = 1.0
+        while True:
+            for j in range(nn):
+                trial[j] = min(mu * normal[j], max(-mu * normal[j], s[j] - lam * (ds0 if j == 0 else ds1)))
+            tn = resid(trial, rt)
+            if tn < norm or lam < 1e-6:
+                break
+            lam *= 0.5
+        s[:] = trial
+        r[:nn] = rt
+        if tn >= norm:
+            return
+        norm = tn
+
+
+@njit(cache=True)
+def _touching(w, nc, nn):
+    """Mark the contacts touching at some unknown node; True if the set changed."""
+    changed = False
+    for c in range(nc):
+        touching = False
+        for j in range(nn):
+            if node_iface(w, j).normal[c] > 0.0:
+                touching = True
+        if touching != w.touching[c]:
+            changed = True
+        w.touching[c] = touching
+    return changed
+
+
+@njit(cache=True)
+def _newton_matrix(w, cache, slot, frame):
+    """I - dG/dX on the touching contacts' unknowns, factorised into w.Ma (their indices in w.idx,
+    their count in w.na): dG/dX from the contact law's derivatives (`_jacobian_rows`) and each
+    contact granule's own response (`_granule_response`); the full rows in w.J (for the open
+    contacts' columns). False if singular."""
+    k0 = cache.known
+    nn = cache.nodes.shape[0] - k0
+    m2 = w.un.shape[1]
     nc = m2 // 2
-    M = w.J
-    for r in range(2 * m2):
-        w.r[r] = w.G[r] - w.X[r]
-    _jacobian_rows(M, 0, w.iface.Du, w.iface.Dw, cache.Cu[slot], cache.Cw[slot], h, h, w.inv_m, w.spin, frame.tangent)
-    _jacobian_rows(M, m2, w.iface_m.Du, w.iface_m.Dw, cache.Cum[slot], cache.Cwm[slot], h, 0.5 * h, w.inv_m, w.spin,
-                   frame.tangent)
-    for r in range(2 * m2):
-        M[r, r] += 1.0
-    dX = np.linalg.solve(M, w.r)
+    n = nn * m2
+    M, A, rows, idx, piv = w.J, w.A, w.rows, w.idx, w.piv
+    na = 0
+    for j in range(nn):
+        for c in range(nc):
+            if w.touching[c]:
+                idx[na] = j * m2 + 2 * c
+                idx[na + 1] = j * m2 + 2 * c + 1
+                na += 2
+    w.na[0] = na
+    for c in range(nc):
+        if not w.touching[c]:
+            continue
+        for j in range(nn):
+            _jacobian_rows(rows, 2 * j, c, node_iface(w, j), cache.Cu[slot, j], cache.Cw[slot, j], k0)
+        _granule_response(w, cache, slot, c, frame.tangent, A)
+        core.lu_factor(A, 2 * nn, piv)
+        Ai = w.Ai
+        for i in range(2 * nn):  # A^-1, column by column
+            for k in range(2 * nn):
+                w.col[k] = 1.0 if k == i else 0.0
+            core.lu_solve(A, 2 * nn, piv, w.col)
+            for k in range(2 * nn):
+                Ai[k, i] = w.col[k]
+        for j in range(nn):  # the contact's rows <- A^-1 rows
+            for d in range(2):
+                i = 2 * j + d
+                for q in range(n):
+                    acc = 0.0
+                    for k in range(2 * nn):
+                        acc += Ai[i, k] * rows[k, q]
+                    M[j * m2 + 2 * c + d, q] = acc
+    for a in range(na):
+        for b in range(na):
+            w.Ma[a, b] = M[idx[a], idx[b]] + (1.0 if a == b else 0.0)
+    return na == 0 or core.lu_factor(w.Ma, na, w.pivA)
+
+
+@njit(cache=True)
+def _newton_step(w, cache, slot, frame, law):
+    """X <- X + dX with (I - dG/dX) dX = G - X (`_newton_matrix`, possibly from an earlier iterate
+    of the step). A contact open at every node exerts no force whatever X: its forces are set to
+    zero, and the system is solved for the touching contacts only. Then, where a contact's
+    friction is stiff (its local map is not contractive, the paper's |lambda| > 1), its tangential
+    forces at all nodes come from the root of its local friction model (`local_friction_solve`)."""
+    k0 = cache.known
+    nn = cache.nodes.shape[0] - k0
+    m2 = w.un.shape[1]
+    nc = m2 // 2
+    n = nn * m2
+    M, idx = w.J, w.idx
+    na = w.na[0]
+    for j in range(nn):
+        for c in range(nc):
+            for d in range(2):
+                k = j * m2 + 2 * c + d
+                w.dX[k] = 0.0 if w.touching[c] else -w.X[k]
+    for a in range(na):
+        ra = idx[a]
+        acc = w.G[ra] - w.X[ra]
+        for q in range(n):
+            if w.dX[q] != 0.0:
+                acc -= M[ra, q] * w.dX[q]
+        w.rhs_a[a] = acc
+    if na > 0:
+        core.lu_solve(w.Ma, na, w.pivA, w.rhs_a)
+        for a in range(na):
+            w.dX[idx[a]] = w.rhs_a[a]
+    s, s0, vt0, N, B = w.ls, w.ls0, w.lvt, w.lN, w.lB
     for c in range(nc):
         tx, ty = frame.tangent[c, 0], frame.tangent[c, 1]
-        sj = w.X[2 * c] * tx + w.X[2 * c + 1] * ty
-        for k in (2 * c, 2 * c + 1, m2 + 2 * c, m2 + 2 * c + 1):
-            w.X[k] += dX[k]
-        if w.iface.normal[c] <= 0.0 or not frame.has_tangent[c]:
+        stiff = False
+        for j in range(nn):
+            iface = node_iface(w, j)
+            k = j * m2 + 2 * c
+            s0[j] = w.X[k] * tx + w.X[k + 1] * ty
+            w.X[k] += w.dX[k]
+            w.X[k + 1] += w.dX[k + 1]
+            s[j] = w.X[k] * tx + w.X[k + 1] * ty
+            vt0[j] = iface.vrel[c]
+            N[j] = max(iface.normal[c], 0.0)
+            for b in range(nn):
+                B[j, b] = core.tangential_compliance(cache.Cw[slot, j, k0 + b], c, tx, ty) \
+                    + (w.inv_m[c] + w.spin[c]) * cache.I1[slot, j, k0 + b]
+            if N[j] > 0.0 and friction_map_slope(law.mu, law.k_s, N[j], 0.0, B[j, j]) > 1.0:
+                stiff = True
+        if not stiff or not frame.has_tangent[c]:
             continue
-        # the end velocity's response to F1, directly (datum 2) and through F1' (datum 3, 4/h)
-        beta = core.tangential_compliance(cache.Cw[slot, 2], c, tx, ty) + 4.0 / h * core.tangential_compliance(cache.Cw[slot, 3], c, tx, ty)
-        w.X[2 * c], w.X[2 * c + 1] = core.stiff_friction_root(w.X[2 * c], w.X[2 * c + 1], tx, ty, sj, w.iface.normal[c],
-                                                              w.iface.vrel[c], beta, law)
+        local_friction_solve(s, s0, vt0, N, B, law, w.lr, w.lJ)
+        for j in range(nn):
+            k = j * m2 + 2 * c
+            st_ = w.X[k] * tx + w.X[k + 1] * ty
+            w.X[k] += (s[j] - st_) * tx
+            w.X[k + 1] += (s[j] - st_) * ty
 
 
 @njit(cache=True)
-def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
+def predict(st, cache, h, X):
+    """The unknowns' first guess: the last step's force polynomial continued into the new step
+    (the current force where that step is much shorter than the new one, or at the start)."""
+    nodes, k0 = cache.nodes, cache.known
+    nb = nodes.shape[0]
+    m2 = st.u.shape[0]
+    hp = st.clock[0] - st.clock[1]
+    H, dH = np.empty(nb), np.empty(nb)
+    for j in range(nb - k0):
+        if hp <= 0.0 or h > 2.0 * hp:
+            for r in range(m2):
+                X[j * m2 + r] = st.F[r // 2, r % 2]
+            continue
+        basis_values(st.Ts, hp + nodes[k0 + j] * h, H, dH)
+        for r in range(m2):
+            acc = 0.0
+            for b in range(nb):
+                acc += H[b] * st.Fs[b, r // 2, r % 2]
+            X[j * m2 + r] = acc
+
+
+@njit(cache=True)
+def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
     """Iterate X = G(X) for one step of size h (Newton, or the fixed point). Returns (status,
     iterations); on success w holds the end state."""
     nc = st.F.shape[0]
     m2 = 2 * nc
-    # guess: the force continues from the start along its slope
-    for r in range(m2):
-        w.X[r] = st.F[r // 2, r % 2] + h * st.Fd[r // 2, r % 2]
-        w.X[m2 + r] = st.F[r // 2, r % 2] + 0.5 * h * st.Fd[r // 2, r % 2]
+    n = (cache.nodes.shape[0] - cache.known) * m2
+    predict(st, cache, h, w.X)
     mo = w.motion
     for c in range(nc):
         mo.u0[c, 0] = st.u[2 * c]
@@ -391,22 +709,46 @@ def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
         g = model.points.g[c]
         w.inv_m[c] = 1.0 / gr.mass[g]
         w.spin[c] = gr.radius[g] ** 2 / gr.inertia[g]
+    last = np.inf
+    backtracks = 0
     for it in range(1, cfg.max_iterations + 1):
-        if not hermite_map(st, t, h, model, cache, slot, rate, w, cfg.newton):
+        if not force_map(st, t, h, model, solid, cache, slot, rate, w, cfg.newton):
             return core.NON_FINITE, it
-        if frame.fixed:
+        if solid.frame.fixed:
             w.X[:] = w.G
             return core.CONVERGED, it
         ok = True
-        for r in range(2 * m2):
-            if abs(w.G[r] - w.X[r]) > cfg.abstol + cfg.reltol * abs(w.X[r]):
+        worst = 0.0  # the residual against the tolerance
+        for r in range(n):
+            ratio = abs(w.G[r] - w.X[r]) / (cfg.abstol + cfg.reltol * abs(w.X[r]))
+            worst = max(worst, ratio)
+            if ratio > 1.0:
                 ok = False
+        # at the round-off floor (tiny steps amplify it: the contacts' velocity moves with the
+        # force's slope) Newton stalls; a stalled residual within 100 tolerances is converged
+        if not ok and it > 1 and worst <= 100.0 and worst > 0.5 * last:
+            ok = True
+        if not ok and cfg.newton and worst > 2.0 * last and backtracks < 6:
+            # the step made things worse (its linear model overshot, e.g. a saturating friction or
+            # a contact that opened): halve it
+            backtracks += 1
+            for r in range(n):
+                w.X[r] = 0.5 * (w.X[r] + w.Xprev[r])
+            continue
+        backtracks = 0
+        last = worst
         if ok or not cfg.newton:
             w.X[:] = w.G
             if ok:
                 return core.CONVERGED, it
             continue
-        _newton_step(w, cache, slot, h, frame, model.law)
+        # the matrix of the step's first iterate serves the later ones (a chord Newton: the same
+        # iterations as a fresh matrix each time, measured), unless a contact opened or closed
+        if _touching(w, nc, n // m2) or it == 1:
+            if not _newton_matrix(w, cache, slot, solid.frame):
+                return core.NO_CONVERGENCE, it
+        w.Xprev[:] = w.X
+        _newton_step(w, cache, slot, solid.frame, model.law)
     return core.NO_CONVERGENCE, cfg.max_iterations
 
 
@@ -414,36 +756,42 @@ def hermite_solve(st, t, h, model, cache, slot, cfg, frame, w):
 
 
 @njit(cache=True, inline="always")
-def propagate_mode(hom, wd, wv, i, eta0, etad0, q0, qd0, q1, qd1):
+def propagate_mode(hom, wd, wv, i, eta0, etad0, qdat):
     """Mode i's displacement and velocity after a step (or at a point inside it) from its start
-    state and its modal Hermite force data (P'F0, P'F0', P'F1, P'F1'), with the weights of
+    state and its modal force data qdat (nb, nr), with the weights of
     `solid.propagation.weights_at`."""
-    eta = hom[i, 0] * eta0 + hom[i, 1] * etad0 + wd[i, 0] * q0 + wd[i, 1] * qd0 + wd[i, 2] * q1 + wd[i, 3] * qd1
-    etad = hom[i, 2] * eta0 + hom[i, 0] * etad0 + wv[i, 0] * q0 + wv[i, 1] * qd0 + wv[i, 2] * q1 + wv[i, 3] * qd1
+    eta = hom[i, 0] * eta0 + hom[i, 1] * etad0
+    etad = hom[i, 2] * eta0 + hom[i, 0] * etad0
+    for b in range(wd.shape[1]):
+        eta += wd[i, b] * qdat[b, i]
+        etad += wv[i, b] * qdat[b, i]
     return eta, etad
 
 
 @njit(cache=True)
 def trial_ledger(st, solid, cache, slot, model, w):
     """E_solid + E_granular + D - W (eq. 13) at the end of the trial step: the modes' energy from
-    their exact end state (P' F1, P' F1' kept in w for the accept), the dropped modes' static
+    their exact end state (the modal data kept in w for the accept), the dropped modes' static
     energy 1/2 F1' R F1, the granules' energy (11) and the ledger's accumulators."""
     m2 = st.u.shape[0]
     nr = st.eta.shape[0]
-    f1 = w.X[:m2]
+    nb, k0 = cache.nodes.shape[0], cache.known
+    nn = nb - k0
     if nr > 0:
-        w.qF1[:] = np.dot(f1, solid.P)
-        w.qFd1[:] = np.dot(w.Fd1, solid.P)
-    hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
+        w.qdat[0, :] = st.q
+        if k0 > 1:
+            w.qdat[1, :] = st.qd
+        w.qdat[k0:, :] = np.dot(w.X.reshape(nn, m2), solid.P)
+    hom = cache.hom[slot, nn - 1]
+    wd, wv = cache.wd[slot], cache.wv[slot]
     es = 0.0
     for i in range(nr):
-        e, v = propagate_mode(hom, wd, wv, i, st.eta[i], st.etad[i], st.qF[i], st.qFd[i], w.qF1[i], w.qFd1[i])
+        e, v = propagate_mode(hom, wd, wv, i, st.eta[i], st.etad[i], w.qdat)
+        w.eta1[i] = e
+        w.etad1[i] = v
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
-    for r in range(m2):
-        for q in range(m2):
-            es += 0.5 * f1[r] * solid.R[r, q] * f1[q]
     nc = m2 // 2
-    kin, rot, pot = granule_energies(w.ytr, model, w.u1.reshape(nc, 2))
+    kin, rot, pot = granule_energies(w.ytr, model, w.un[nn - 1].reshape(nc, 2))
     n = kin.shape[0]
     return es + kin.sum() + rot.sum() + pot.sum() + w.ytr[6 * n] + w.ytr[6 * n + 1] - w.ytr[6 * n + 2]
 
@@ -467,41 +815,50 @@ def step_error(y, w, cfg, granules, h, defect):
 
 @njit(cache=True)
 def accept(st, solid, cache, slot, h, w, rate, ledger):
-    """The accepted step: modes, interface data and the granules to t + h; the start kept for
-    dense output."""
+    """The accepted step: modes, interface data and the granules to t + h; the step kept for dense
+    output and the next predictor. The force's end slope becomes the next step's start slope (C1
+    model), but for a contact open at the end: its force rises from zero again with zero slope."""
     nc = st.F.shape[0]
     m2 = 2 * nc
     nr = st.eta.shape[0]
+    nb, k0 = cache.nodes.shape[0], cache.known
+    nn = nb - k0
     st.y0[:] = st.y
     st.dy0[:] = st.dy
     st.eta0[:] = st.eta
     st.etad0[:] = st.etad
-    st.F0[:, :] = st.F
-    st.Fd0[:, :] = st.Fd
-    st.qF0[:] = st.qF
-    st.qFd0[:] = st.qFd
-    f1 = w.X[:m2]
-    fd1 = w.Fd1
-    qF1, qFd1 = w.qF1, w.qFd1  # from `trial_ledger`
-    hom, wd, wv = cache.hom[slot], cache.wd[slot], cache.wv[slot]
-    for i in range(nr):
-        st.eta[i], st.etad[i] = propagate_mode(hom, wd, wv, i, st.eta[i], st.etad[i], st.qF[i], st.qFd[i], qF1[i], qFd1[i])
-        st.qF[i] = qF1[i]
-        st.qFd[i] = qFd1[i]
+    gather_data(st, w.X, k0, w.D)
+    for b in range(nb):
+        for r in range(m2):
+            st.Fs[b, r // 2, r % 2] = w.D[b, r]
+    st.qs[:, :] = w.qdat  # from `trial_ledger`
+    T = cache.T[slot]
+    st.Ts[:, :] = T
+    st.eta[:] = w.eta1  # from `trial_ledger`
+    st.etad[:] = w.etad1
+    end = node_iface(w, nn - 1)
     for r in range(m2):
-        st.F[r // 2, r % 2] = f1[r]
-        st.Fd[r // 2, r % 2] = fd1[r]
-        st.u[r] = w.u1[r]
-        st.w[r] = w.w1[r]
+        slope = 0.0
+        for b in range(nb):
+            slope += (T[b, 1] + T[b, 2] * h + 0.5 * T[b, 3] * h * h) * st.Fs[b, r // 2, r % 2]
+        st.F[r // 2, r % 2] = st.Fs[nb - 1, r // 2, r % 2]
+        st.Fd[r // 2, r % 2] = slope if end.normal[r // 2] > 0.0 else 0.0
+    st.q[:] = st.qs[nb - 1]
+    if k0 > 1 and nr > 0:
+        st.qd[:] = np.dot(st.Fd.ravel(), solid.P)
+    st.u[:] = w.un[nn - 1]
+    st.w[:] = w.wn[nn - 1]
     mo, sm = w.motion, st.step_motion
     sm.u0[:, :] = mo.u0
     sm.v0[:, :] = mo.v0
     sm.a[:, :] = mo.a
     sm.j[:, :] = mo.j
+    sm.d4[:, :] = mo.d4
+    sm.d5[:, :] = mo.d5
     st.y[:] = w.ytr
     st.dy[:] = w.k5
-    st.normal[:] = w.iface.normal
-    st.vrel[:] = w.iface.vrel
+    st.normal[:] = end.normal
+    st.vrel[:] = end.vrel
     st.clock[1] = st.clock[0]
     st.clock[0] += h
     st.clock[3] = rate
@@ -511,35 +868,15 @@ def accept(st, solid, cache, slot, h, w, rate, ledger):
 @njit(cache=True)
 def friction_slopes(st, law, cache, slot, frame, lam):
     """The slope of each contact's local friction map over the step just taken, the analogue of
-    (A9) for this integrator: mu k_s |N| t' Cw t / cosh^2(k_s v_t), Cw the tangential velocity
+    (A9) for this integrator: mu k_s |N| t' Cw t / cosh^2(k_s v_t), Cw the end velocity's
     response to the end force."""
+    nb, k0 = cache.nodes.shape[0], cache.known
     for c in range(lam.shape[0]):
         if not frame.has_tangent[c]:
             lam[c] = 0.0
             continue
-        ctt = core.tangential_compliance(cache.Cw[slot, 2], c, frame.tangent[c, 0], frame.tangent[c, 1])
+        ctt = core.tangential_compliance(cache.Cw[slot, nb - k0 - 1, nb - 1], c, frame.tangent[c, 0], frame.tangent[c, 1])
         lam[c] = friction_map_slope(law.mu, law.k_s, st.normal[c], st.vrel[c], ctt)
-
-
-@njit(cache=True)
-def free_response(st, solid, cache, slot, w):
-    """The contacts' displacement and velocity at the end and at mid-step with no force data
-    (w.uf, w.wf, w.umf, w.wmf): P applied to the modes' free response."""
-    nr = st.eta.shape[0]
-    if nr == 0:
-        w.uf[:] = 0.0
-        w.wf[:] = 0.0
-        w.umf[:] = 0.0
-        w.wmf[:] = 0.0
-        return
-    ww = w.ww
-    for hom, out_u, out_w in ((cache.hom[slot], w.uf, w.wf), (cache.homm[slot], w.umf, w.wmf)):
-        for i in range(nr):
-            ww[i] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
-        out_u[:] = np.dot(solid.P, ww)
-        for i in range(nr):
-            ww[i] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
-        out_w[:] = np.dot(solid.P, ww)
 
 
 @njit(cache=True)
@@ -564,17 +901,16 @@ def grid_level(lev):
 
 
 @njit(cache=True)
-def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
-    """Accepted steps until the clock passes t_target (dense output covers the output itself).
-    Returns (status, steps logged): core.DONE, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE,
-    core.NON_FINITE or core.BALANCE_LOST (the ledger (13) drifted beyond cfg.ledger_limit)."""
+def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log, k, w):
+    """Accepted steps until the clock passes t_target (dense output covers the output itself),
+    logged from entry k of `log` on. Returns (status, entries logged): core.DONE, core.REBUILD,
+    core.LOG_FULL, core.NO_CONVERGENCE, core.NON_FINITE or core.BALANCE_LOST (the ledger (13)
+    drifted beyond cfg.ledger_limit)."""
     nc = st.F.shape[0]
     n = model.granules.radius.shape[0]
-    w = work_for(st.y, nc, st.eta.shape[0])
     lim2 = cfg.max_disp * cfg.max_disp
     lam = np.zeros(nc)
     off = cache.ready.shape[0] - 1
-    k = 0
     while st.clock[0] < t_target:
         if k >= log.t.shape[0]:
             return core.LOG_FULL, k
@@ -588,7 +924,7 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
                 slot = off
         ensure_ops(cache, solid, slot, h)
         free_response(st, solid, cache, slot, w)
-        status, its = hermite_solve(st, t, h, model, cache, slot, cfg, solid.frame, w)
+        status, its = interface_solve(st, t, h, model, solid, cache, slot, cfg, w)
         if status != core.CONVERGED:
             if level + 2 * GRID_PER_OCTAVE <= cfg.levels:
                 st.meta[0] = level + 2 * GRID_PER_OCTAVE  # a quarter of the step (fixed steps: then dt again)
@@ -621,11 +957,86 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log):
 
 
 @njit(cache=True)
+def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, out, done):
+    """Accepted steps through the output times `targets`, the state at each by dense output into
+    `out` (y, eta, eta', F per output), from output done[0] on; done[0] counts the outputs filled.
+    Returns (status, steps logged) as `advance_exact`, which it calls: DONE once all are filled."""
+    nc = st.F.shape[0]
+    w = work_for(st.y, nc, st.eta.shape[0], cache.nodes.shape[0], cache.nodes.shape[0] - cache.known)
+    k = 0
+    oy, oeta, oetad, oF = out
+    while done[0] < targets.shape[0]:
+        o = done[0]
+        if st.clock[0] >= targets[o] * (1.0 - 1e-12):  # the last step reached it
+            dense_state(st, solid, model, targets[o], oy[o], oeta[o], oetad[o], oF[o])
+            done[0] += 1
+            continue
+        status, k = advance_exact(st, model, ref_pos, solid, cache, cfg, targets[o], kinks, log, k, w)
+        if status != core.DONE:
+            return status, k
+    return core.DONE, k
+
+
+@njit(cache=True)
+def output_quantities(oy, oeta, oetad, oF, model, solid, medium, n_media, q):
+    """Per output o of a batch: each medium's energy (11) in q.media[o], the solid's kinetic and
+    potential energy (the dropped modes' static 1/2 F'RF included), the contacts' displacement,
+    the deepest overlap (eq. 2) over the smaller radius with its kind (0 pair, 1 wall, 2 solid)
+    and index."""
+    nc = oF.shape[1]
+    radius = model.granules.radius
+    pairs, walls, points = model.pairs, model.walls, model.points
+    for o in range(oy.shape[0]):
+        f = oF[o].ravel()
+        su = np.dot(solid.P, oeta[o]) if solid.P.shape[1] else np.zeros(2 * nc)
+        ek = 0.5 * np.dot(oetad[o], oetad[o])
+        ep = 0.0
+        for i in range(oeta.shape[1]):
+            ep += 0.5 * solid.omega[i] ** 2 * oeta[o, i] ** 2
+        q.solid[o, 0] = ek
+        q.solid[o, 1] = ep
+        sup = su.reshape(nc, 2)
+        q.su[o, :, :] = sup
+        kin, rot, pot = granule_energies(oy[o], model, sup)
+        for m in range(n_media):
+            q.media[o, m] = 0.0
+        for i in range(kin.shape[0]):
+            q.media[o, medium[i]] += kin[i] + rot[i] + pot[i]
+        dp, dw, ds = overlaps(oy[o], model, sup)
+        best, kind, idx = 0.0, -1, -1
+        for c in range(dp.shape[0]):
+            r = dp[c] / min(radius[pairs.i[c]], radius[pairs.j[c]])
+            if r > best:
+                best, kind, idx = r, 0, c
+        for c in range(dw.shape[0]):
+            r = dw[c] / radius[walls.g[c]]
+            if r > best:
+                best, kind, idx = r, 1, c
+        for c in range(ds.shape[0]):
+            r = ds[c] / radius[points.g[c]]
+            if r > best:
+                best, kind, idx = r, 2, c
+        q.overlap[o] = best
+        q.where[o, 0] = kind
+        q.where[o, 1] = idx
+
+
+class OutputQuantities(NamedTuple):
+    """Filled by `output_quantities` for a batch of K outputs."""
+
+    media: np.ndarray  # (K, n_media)
+    solid: np.ndarray  # (K, 2): kinetic, potential
+    su: np.ndarray  # (K, nc, 2)
+    overlap: np.ndarray  # (K,)
+    where: np.ndarray  # (K, 2) int: kind, index
+
+
+@njit(cache=True)
 def dense_state(st, solid, model, t_out, yo, eta_o, etad_o, F_o):
     """The state at t_out inside the last accepted step [t0, t]: the granules by RK4 from the
     step's start over tau = t_out - t0 under the step's own contact motion (full RK4 accuracy,
-    the step itself unchanged), the modes by their exact response to the step's cubic force, and
-    the interface force by its Hermite cubic."""
+    the step itself unchanged), the modes by their exact response to the step's force polynomial,
+    and the interface force by that polynomial."""
     t0, t1 = st.clock[1], st.clock[0]
     h = t1 - t0
     tau = t_out - t0
@@ -638,14 +1049,17 @@ def dense_state(st, solid, model, t_out, yo, eta_o, etad_o, F_o):
     yo[:] = st.y0
     if tau > 0.0:
         rk4_substepped(yo, t0, tau, model, st.step_motion, st.clock[3], np.empty((5, yo.shape[0])))
-    T, H, dH = np.empty((4, 4)), np.empty(4), np.empty(4)
-    hermite_taylor(h, T)
-    hermite_values(T, tau, H, dH)
+    nb = st.Ts.shape[0]
+    H, dH = np.empty(nb), np.empty(nb)
+    basis_values(st.Ts, tau, H, dH)
     for c in range(st.F.shape[0]):
         for d in range(2):
-            F_o[c, d] = H[0] * st.F0[c, d] + H[1] * st.Fd0[c, d] + H[2] * st.F[c, d] + H[3] * st.Fd[c, d]
+            acc = 0.0
+            for b in range(nb):
+                acc += H[b] * st.Fs[b, c, d]
+            F_o[c, d] = acc
     nr = st.eta.shape[0]
-    hom, wd, wv, wa = np.empty((nr, 3)), np.empty((nr, 4)), np.empty((nr, 4)), np.empty((nr, 4))
-    weights_at(solid.omega, h, tau, hom, wd, wv, wa)
+    hom, wd, wv = np.empty((nr, 3)), np.empty((nr, nb)), np.empty((nr, nb))
+    weights_at(solid.omega, tau, st.Ts, hom, wd, wv)
     for i in range(nr):
-        eta_o[i], etad_o[i] = propagate_mode(hom, wd, wv, i, st.eta0[i], st.etad0[i], st.qF0[i], st.qFd0[i], st.qF[i], st.qFd[i])
+        eta_o[i], etad_o[i] = propagate_mode(hom, wd, wv, i, st.eta0[i], st.etad0[i], st.qs)

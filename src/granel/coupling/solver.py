@@ -19,7 +19,7 @@ from scipy.sparse.linalg import splu
 
 from ..granular.bundles import Motion
 from ..granular.kernels import rhs
-from ..granular.system import GranularSystem, GranularState, Stepper
+from ..granular.system import GranularSystem, GranularState, Stepper, contact_label
 from ..solid.base import SolidModel
 from ..solid.modal import at_dofs
 from . import core, exact
@@ -39,7 +39,8 @@ class SolverSettings:
     abstol: float = 1e-6  # (A4) [N]
     reltol: float = 1e-6
     max_iterations: int = 50
-    integrator: str = "newmark"  # the fast method's solid integrator: newmark | exact (modal, cubic force)
+    integrator: str = "newmark"  # the fast method's solid integrator: newmark | exact (modal, polynomial force)
+    force_model: str = "quadratic"  # the exact integrator's force over a step: quadratic | cubic | linear
     adaptive: bool = True  # the exact integrator's error-controlled steps (False: every step is dt)
     rtol: float = 1e-5  # local error tolerance of the adaptive step, relative to v_ref
     atol: float = 1e-9  # [m/s]
@@ -56,6 +57,11 @@ class SolverSettings:
 
 # the exact integrator stops when the energy ledger (13) has drifted by this share of the input
 BALANCE_LIMIT = 1e-2
+# outputs per compiled call of the exact integrator
+OUTPUT_BATCH = 64
+# the exact integrator's interface forces converge this much tighter than (A4)'s tolerances, so
+# that the energy-ledger control does not chase the iteration's own floor
+NEWTON_TIGHTER = 0.1
 
 
 class SolverError(RuntimeError):
@@ -197,10 +203,11 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
 
 
 class ExactSolver:
-    """The fast method with the exact modal integrator (`coupling.exact`): retained modes below
-    `mode_cutoff` propagated in closed form under a C1 cubic interface force, the dropped modes'
-    static compliance at the contacts, Newton on the end and mid-step forces, and error-controlled
-    steps with dense output at the output times."""
+    """The fast method with the exact modal integrator (`coupling.exact`): the eigenmodes below
+    `mode_cutoff` and the residual modes of the dropped ones (their static compliance at the
+    contacts) propagated in closed form under an interface force that is a polynomial over the
+    step, Newton on the forces at the polynomial's nodes, and error-controlled steps with dense
+    output at the output times."""
 
     def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
                  schedule, modes=None, v_ref: float = 1.0, e_ref: float = 1.0, kinks=()):
@@ -214,33 +221,32 @@ class ExactSolver:
             B = model.contact_map()
             P = at_dofs(B, modes.shapes, keep)
             omega = modes.omega[keep]
-            static = residual_compliance(model, B, P, omega)
-            # the dropped modes follow the force statically: eta_i = (P_i' F) / w_i^2
+            # the dropped modes: their static compliance at the contacts, as residual modes
+            om_r, P_r, self.residual_Z = residual_modes(model, B, modes.shapes, keep, omega,
+                                                        residual_compliance(model, B, P, omega))
+            self.kept, self.residual = int(len(omega)), int(len(om_r))
+            omega = np.concatenate([omega, om_r])
+            P = np.ascontiguousarray(np.hstack([P, P_r]))
             self.P_drop = at_dofs(B, modes.shapes, ~keep)
             self.omega_drop = modes.omega[~keep]
         else:
-            P, omega, static = np.zeros((2 * nc, 0)), np.zeros(0), np.zeros((2 * nc, 2 * nc))
+            P, omega = np.zeros((2 * nc, 0)), np.zeros(0)
+            self.kept, self.residual, self.residual_Z = 0, 0, np.zeros((2 * nc, 0))
             self.P_drop, self.omega_drop = np.zeros((2 * nc, 0)), np.zeros(0)
-        self.modes, self.kept = modes, int(len(omega))
-        self.solid = exact.ExactSolid(omega, P, static, frame)
+        self.modes = modes
+        self.solid = exact.ExactSolid(omega, P, frame)
         fixed = not settings.adaptive
         levels = 4 * settings.halvings  # fixed steps use the smaller levels only to retry a failed step
         h_max = settings.dt if fixed else settings.max_step
-        nr, m2 = len(omega), 2 * nc
-        L = levels + 2
-        z4 = lambda: np.zeros((L, 4, m2, m2))  # noqa: E731
-        self.cache = exact.OpsCache(np.zeros(L, bool), np.zeros((L, nr, 3)), np.zeros((L, nr, 4)), np.zeros((L, nr, 4)),
-                                    np.zeros((L, nr, 3)), z4(), z4(), z4(), z4())
-        # the interface forces converge 1000 times tighter than (A4)'s tolerances: the energy-ledger
-        # control would otherwise chase the iteration's own floor down to tiny steps
+        self.cache = exact.ops_cache(settings.force_model, levels, len(omega), nc)
         self.cfg = exact.ExactConfig(float(h_max), int(levels), not fixed, float(settings.rtol), float(settings.atol),
                                      float(v_ref), float(e_ref), float(settings.ledger_tol),
                                      BALANCE_LIMIT * float(e_ref), float(schedule.duration), True,
-                                     1e-3 * float(settings.abstol), 1e-3 * float(settings.reltol),
+                                     NEWTON_TIGHTER * float(settings.abstol), NEWTON_TIGHTER * float(settings.reltol),
                                      int(settings.max_iterations), float(self.stepper.max_disp))
         self.kinks = np.array(sorted(k for k in kinks if np.isfinite(k) and k > 0), float)
         self.log = step_log(nc)
-        self.t_out = 0.0
+        self.t_out, self._k, self._batch = 0.0, 0, None
 
     @property
     def name(self) -> str:
@@ -251,15 +257,9 @@ class ExactSolver:
         y = self.y0.copy()
         dy = np.zeros_like(y)
         rhs(0.0, y, dy, self.stepper.model, self.stepper.still, 0.0)
-        z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
-        ledger = self._ledger(y)
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
-        self.st = exact.ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc),
-                                   y.copy(), dy.copy(), z(nr), z(nr), zc(), zc(), z(nr), z(nr), Motion(zc(), zc(), zc(), zc()),
-                                   np.array([0.0, 0.0, 1e-4, 0.0, ledger, ledger,
-                                             float(max(0, min(level, self.cfg.levels)))]),
-                                   np.array([max(0, min(level, self.cfg.levels)), 0], np.int64))
-        self.t_out = 0.0
+        self.st = exact.initial_state(y, dy, nr, nc, len(self.cache.nodes), self._ledger(y), max(0, min(level, self.cfg.levels)))
+        self.t_out, self._k, self._batch = 0.0, 0, None
 
     def _ledger(self, y) -> float:
         """E_granular + D - W of the initial state (the solid starts at rest)."""
@@ -279,26 +279,61 @@ class ExactSolver:
                                            for k in exact.ExactState._fields])
         self.stepper.refresh(arrays["ref_pos"])
         self.t_out = float(arrays["t_out"])
-        self._dense_at = None
+        self._k, self._batch = int(round(self.t_out / self._target(1))), None
 
     @property
     def t(self) -> float:
         return self.t_out
 
+    def _target(self, k: int) -> float:
+        return k * self.schedule.output_every if self.settings.adaptive else k * self.schedule.per * self.settings.dt
+
     def advance(self, k: int, trajectory) -> None:
-        """Steps until the clock passes output k; the state there comes by dense output."""
-        target = k * self.schedule.output_every if self.settings.adaptive else k * self.schedule.per * self.settings.dt
-        st = self.st
-        while st.clock[0] < target * (1 - 1e-12):
-            status, m = exact.advance_exact(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache, self.cfg,
-                                            target, self.kinks, self.log)
+        """To output k. Outputs come in batches of up to OUTPUT_BATCH from one compiled call (the
+        steps through them and the state at each by dense output), ending at checkpoint outputs so
+        that `save` sees the state of its output; a failure inside a batch is raised when the
+        driver asks for an output beyond the last one reached."""
+        b = self._batch
+        if b is not None and b["k0"] <= k < b["k0"] + b["done"]:
+            self._k, self.t_out = k, self._target(k)
+            return
+        if b is not None and b.get("error") is not None:
+            raise b["error"]
+        self._run_batch(k, trajectory)
+        self._k, self.t_out = k, self._target(k)
+        b = self._batch
+        if b["done"] == 0:
+            raise b["error"]
+
+    def _run_batch(self, k0: int, trajectory) -> None:
+        outputs = self.schedule.outputs
+        k1 = min(outputs, k0 + OUTPUT_BATCH - 1)
+        every = self.schedule.checkpoint_period()
+        if every:
+            k1 = min(k1, (k0 + every - 1) // every * every)  # a checkpoint output ends the batch
+        ks = np.arange(k0, k1 + 1)
+        targets = np.array([self._target(int(k)) for k in ks])
+        K, nr, nc = len(ks), len(self.solid.omega), len(self.system.solid_contacts)
+        out = (np.empty((K, len(self.st.y))), np.empty((K, nr)), np.empty((K, nr)), np.empty((K, nc, 2)))
+        done = np.zeros(1, np.int64)
+        st, error = self.st, None
+        while done[0] < K:
+            status, m = exact.advance_outputs(st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache,
+                                              self.cfg, targets, self.kinks, self.log, out, done)
             if m:
                 trajectory.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
             if status == core.REBUILD:
                 self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
             elif status in (core.BALANCE_LOST, core.NO_CONVERGENCE, core.NON_FINITE):
-                raise SolverError(self._diagnosis(status))
-        self.t_out = target
+                error = SolverError(self._diagnosis(status))
+                break
+        n = int(done[0])
+        q = exact.OutputQuantities(np.zeros((K, len(self.system.media))), np.zeros((K, 2)), np.zeros((K, nc, 2)), np.zeros(K),
+                                   np.zeros((K, 2), np.int64))
+        if n:
+            exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], out[3][:n], self.stepper.model, self.solid,
+                                    self.system.medium_index, len(self.system.media), q)
+        self._batch = {"k0": k0, "done": n, "out": out, "q": q, "error": error, "model": self.stepper.model}
 
     def _diagnosis(self, status: int) -> str:
         t, h_min = self.st.clock[0], self.cfg.h_max / 2 ** (self.cfg.levels / 4)
@@ -307,43 +342,86 @@ class ExactSolver:
                     f"with the error control at its smallest step ({h_min:.3e} s): the results would be wrong. "
                     "Try simulation.integrator = \"newmark\" or another simulation.mode_cutoff")
         what = "the granular state became non-finite" if status == core.NON_FINITE else \
-            "Newton on the interface forces and slopes did not converge"
+            "Newton on the interface forces did not converge"
         return f"t = {t:.6e} s: {what} even at the smallest step ({h_min:.3e} s); lower k_s or raise simulation.max_halvings"
 
     def _dense(self):
-        """The state at the output time by dense output, computed once per output (observe and
-        solid_snapshot both read it)."""
-        key = (self.t_out, float(self.st.clock[0]), float(self.st.clock[1]))
-        if getattr(self, "_dense_at", None) is not None and self._dense_at[0] == key:
-            return self._dense_at[1]
+        """The state at the current output: the batch's entry, or (at the start, or just after a
+        resume) dense output of the last step."""
+        b = self._batch
+        if b is not None and b["k0"] <= self._k < b["k0"] + b["done"]:
+            i = self._k - b["k0"]
+            return tuple(a[i] for a in b["out"])
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
         exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
-        self._dense_at = (key, (y, eta, etad, F))
         return y, eta, etad, F
 
     def observe(self) -> dict:
-        y, eta, etad, F = self._dense()
-        f = F.ravel()
-        su = (self.solid.P @ eta + self.solid.R @ f).reshape(-1, 2)
-        ek = 0.5 * float(etad @ etad)
-        ep = 0.5 * float(eta @ (self.solid.omega**2 * eta)) + 0.5 * float(f @ self.solid.R @ f)
-        return observation(self.stepper, GranularState(y, self.t_out), su, (ek, ep), F, self.solid.frame.tangent, self.system)
+        b = self._batch
+        if b is None or not (b["k0"] <= self._k < b["k0"] + b["done"]):
+            y, eta, etad, F = self._dense()
+            su = (self.solid.P @ eta).reshape(-1, 2)
+            ek = 0.5 * float(etad @ etad)
+            ep = 0.5 * float(eta @ (self.solid.omega**2 * eta))
+            return observation(self.stepper, GranularState(y, self.t_out), su, (ek, ep), F, self.solid.frame.tangent,
+                               self.system)
+        i = self._k - b["k0"]
+        y, F, q = b["out"][0][i], b["out"][3][i], b["q"]
+        g = GranularState(y, self.t_out)
+        normals = np.array([c.normal for c in self.system.solid_contacts], float).reshape(-1, 2)
+        ek, ep = float(q.solid[i, 0]), float(q.solid[i, 1])
+        em = q.media[i].copy()
+        dv, df, w = g.dissipated_viscous, g.dissipated_friction, g.input_work
+        return {"pos": g.pos.copy(), "theta": g.theta.copy(), "vel": g.vel.copy(), "omega": g.omega.copy(), "energy_media": em,
+                "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
+                "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
+                "force_normal": np.einsum("ij,ij->i", F, normals),
+                "force_tangential": np.einsum("ij,ij->i", F, self.solid.frame.tangent),
+                "overlap_ratio": float(q.overlap[i]), "overlap_at": contact_label(self.system, b["model"], int(q.where[i, 0]), int(q.where[i, 1]))}
 
     def solid_snapshot(self) -> dict:
-        """All modes: the retained ones' state, the dropped ones' static response to the force
-        (their inertia is neglected, so their velocity is stored as zero and the modal energies
-        add up to the solid's energy)."""
+        """All eigenmodes: the retained ones' state, and the residual modes' state projected on the
+        dropped eigenmodes (their shapes lie in the dropped modes' span: eta_d = W_d^-2 P_d' Z q),
+        so that the modal energies add up to the solid's energy."""
         _, eta, etad, F = self._dense()
-        static = (F.ravel() @ self.P_drop) / self.omega_drop**2
-        return {"eta": np.concatenate([eta, static]).astype(np.float32),
-                "eta_dot": np.concatenate([etad, np.zeros_like(static)]).astype(np.float32)}
+        nk = self.kept
+        Z = self.residual_Z
+        d = (Z @ eta[nk:]) @ self.P_drop / self.omega_drop**2
+        dd = (Z @ etad[nk:]) @ self.P_drop / self.omega_drop**2
+        return {"eta": np.concatenate([eta[:nk], d]).astype(np.float32),
+                "eta_dot": np.concatenate([etad[:nk], dd]).astype(np.float32)}
 
     def attributes(self) -> dict:
         s = self.settings
         return {"name": "fast", "integrator": "exact", "adaptive": int(s.adaptive), "rtol": s.rtol, "atol": s.atol,
-                "max_step": s.max_step, "dt0": s.dt, "mode_cutoff_hz": s.mode_cutoff, "modes_kept": self.kept,
+                "max_step": s.max_step, "dt0": s.dt, "mode_cutoff_hz": s.mode_cutoff, "force_model": s.force_model,
+                "residual_modes": self.residual, "modes_kept": self.kept,
                 "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds, "solid_representation": "modal"}
+
+
+def residual_modes(model: SolidModel, B, shapes, keep, omega, R):
+    """Residual modes of the dropped modes at the contacts: Rayleigh-Ritz on their static shapes
+    Psi = K^-1 B' - Phi W^-2 P' (the retained modes' part removed, so Psi is M-orthogonal to them).
+    Psi' K Psi = R and B Psi = R, so the residual modes' static compliance at the contacts is R
+    exactly, and they carry the inertia of those shapes. Returns (omega_r, P_r = B Phi_r, Z) with
+    Phi_r = Psi Z; shapes that vanish (a beam's tangential DOFs) are left out."""
+    from scipy.linalg import eigh
+
+    m2 = B.shape[0]
+    if np.all(keep):
+        return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0))
+    Psi = splu(model.K.tocsc()).solve(B.T.toarray())
+    scale = np.trace(Psi.T @ (model.M @ Psi))  # the static shapes' size, before the retained part goes
+    Phi = np.asarray(shapes[:, keep])
+    Psi -= Phi @ ((B @ Phi).T / omega[:, None] ** 2)
+    G = Psi.T @ (model.M @ Psi)
+    lam, U = np.linalg.eigh(0.5 * (G + G.T))
+    ok = lam > 1e-12 * scale
+    U = U[:, ok] / np.sqrt(lam[ok])  # Psi U: M-orthonormal
+    w2, Y = eigh(U.T @ (0.5 * (R + R.T)) @ U)
+    Z = U @ Y
+    return np.sqrt(np.maximum(w2, 0.0)), np.ascontiguousarray(R @ Z), Z
 
 
 def residual_compliance(model: SolidModel, B, P, omega) -> np.ndarray:

@@ -93,20 +93,24 @@ class GranularModel(NamedTuple):
 
 
 class Motion(NamedTuple):
-    """The solid contact points' motion inside a step, u(tau) = u0 + v0 tau + a tau^2/2 + j tau^3/6,
-    (nc, 2) each: the constant-average-acceleration interpolation (A3) has j = 0; the exact modal
-    integrator passes the cubic Hermite through the end displacements and velocities. Zero for a
-    rigid solid."""
+    """The solid contact points' motion inside a step, the quintic
+    u(tau) = u0 + v0 tau + a tau^2/2 + j tau^3/6 + d4 tau^4/24 + d5 tau^5/120,
+    (nc, 2) each: the constant-average-acceleration interpolation (A3) has j = d4 = d5 = 0; the
+    exact modal integrator passes the polynomial through the points' exact displacements and
+    velocities at the nodes of its force model (a cubic for two nodes, a quintic for three).
+    Zero for a rigid solid."""
 
     u0: np.ndarray
     v0: np.ndarray
     a: np.ndarray
     j: np.ndarray
+    d4: np.ndarray
+    d5: np.ndarray
 
 
 def still(nc: int) -> Motion:
     z = np.zeros((nc, 2))
-    return Motion(z, z, z, z)
+    return Motion(z, z, z, z, z, z)
 
 
 class InterfaceForces(NamedTuple):
@@ -129,4 +133,5 @@ def interface_buffers(nc):
 @njit(cache=True)
 def motion_buffers(nc):
     """A zeroed `Motion` of nc contact points, each coefficient its own array (scratch)."""
-    return Motion(np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)))
+    return Motion(np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)), np.zeros((nc, 2)),
+                  np.zeros((nc, 2)))

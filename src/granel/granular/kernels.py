@@ -54,13 +54,17 @@ def point_overlap(y, i, c, radius, points, ux, uy):
 @njit(cache=True, inline="always")
 def motion_at(motion, c, tau):
     """(ux, uy, wx, wy): displacement and velocity of contact point c at tau into the step (A3,
-    or the cubic of the exact modal integrator)."""
+    or the polynomial of the exact modal integrator), from the Taylor coefficients of `Motion`."""
     t2 = 0.5 * tau * tau
     t3 = t2 * tau / 3.0
-    ux = motion.u0[c, 0] + motion.v0[c, 0] * tau + motion.a[c, 0] * t2 + motion.j[c, 0] * t3
-    uy = motion.u0[c, 1] + motion.v0[c, 1] * tau + motion.a[c, 1] * t2 + motion.j[c, 1] * t3
-    wx = motion.v0[c, 0] + motion.a[c, 0] * tau + motion.j[c, 0] * t2
-    wy = motion.v0[c, 1] + motion.a[c, 1] * tau + motion.j[c, 1] * t2
+    t4 = 0.25 * t3 * tau
+    t5 = 0.2 * t4 * tau
+    ux = motion.u0[c, 0] + motion.v0[c, 0] * tau + motion.a[c, 0] * t2 + motion.j[c, 0] * t3 + motion.d4[c, 0] * t4 \
+        + motion.d5[c, 0] * t5
+    uy = motion.u0[c, 1] + motion.v0[c, 1] * tau + motion.a[c, 1] * t2 + motion.j[c, 1] * t3 + motion.d4[c, 1] * t4 \
+        + motion.d5[c, 1] * t5
+    wx = motion.v0[c, 0] + motion.a[c, 0] * tau + motion.j[c, 0] * t2 + motion.d4[c, 0] * t3 + motion.d5[c, 0] * t4
+    wy = motion.v0[c, 1] + motion.a[c, 1] * tau + motion.j[c, 1] * t2 + motion.d4[c, 1] * t3 + motion.d5[c, 1] * t4
     return ux, uy, wx, wy
 
 

@@ -295,6 +295,19 @@ def load_bundle(excitations: list[Excitation]) -> Loads:
     return Loads(np.array([e.granule for e in excitations], dtype=np.int64), direction, kind, params, offset, cat(tt), cat(tv))
 
 
+def contact_label(system: GranularSystem, model: GranularModel, kind: int, k: int) -> str:
+    """Who touches at candidate contact k of a kind (0 granule pair, 1 granule-wall, 2 granule-solid
+    point; -1 none), for messages."""
+    lab = system.labels
+    if kind == 0:
+        return f"granules {lab[model.pairs.i[k]]} and {lab[model.pairs.j[k]]}"
+    if kind == 1:
+        return f"granule {lab[model.walls.g[k]]} and wall {int(model.walls.w[k])}"
+    if kind == 2:
+        return f"granule {lab[model.points.g[k]]} and the solid"
+    return ""
+
+
 class NonFiniteStateError(RuntimeError):
     """Raised when the integration produces NaN or inf; carries a diagnosis."""
 
@@ -361,20 +374,13 @@ class Stepper:
         radius, and where it is: a guard against granules passing through each other, a wall or
         the solid."""
         dp, dw, ds = kernels.overlaps(state.y, self.model, self.still.u0 if su is None else su)
-        R, m, lab = self.system.radius, self.model, self.system.labels
+        R, m = self.system.radius, self.model
         cands = [(0.0, "")]
-        if dp.size:
-            r = dp / np.minimum(R[m.pairs.i], R[m.pairs.j])
-            k = int(np.argmax(r))
-            cands.append((float(r[k]), f"granules {lab[m.pairs.i[k]]} and {lab[m.pairs.j[k]]}"))
-        if dw.size:
-            r = dw / R[m.walls.g]
-            k = int(np.argmax(r))
-            cands.append((float(r[k]), f"granule {lab[m.walls.g[k]]} and wall {int(m.walls.w[k])}"))
-        if ds.size:
-            r = ds / R[m.points.g]
-            k = int(np.argmax(r))
-            cands.append((float(r[k]), f"granule {lab[m.points.g[k]]} and the solid"))
+        for kind, ratio in enumerate((dp / np.minimum(R[m.pairs.i], R[m.pairs.j]) if dp.size else dp,
+                                      dw / R[m.walls.g] if dw.size else dw, ds / R[m.points.g] if ds.size else ds)):
+            if ratio.size:
+                k = int(np.argmax(ratio))
+                cands.append((float(ratio[k]), contact_label(self.system, m, kind, k)))
         return max(cands)
 
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:

@@ -313,7 +313,8 @@ def build_solid(sc: Scenario, system) -> SolidModel:
 def solver_settings(sc: Scenario) -> SolverSettings:
     sim = sc.simulation
     return SolverSettings(sim.solver, sim.dt, sim.max_halvings, sim.lambda_max, sim.abstol, sim.reltol, sim.max_iterations,
-                          sim.integrator, sim.adaptive, sim.rtol, sim.atol, sim.max_step, sim.mode_cutoff, sim.ledger_tol)
+                          sim.integrator, sim.force_model, sim.adaptive, sim.rtol, sim.atol, sim.max_step, sim.mode_cutoff,
+                          sim.ledger_tol)
 
 
 def schedule(sc: Scenario) -> Schedule:

@@ -12,9 +12,11 @@ oscillator's impulse response sin(w (h - tau)) / w with tau^k / k! is h^(k+2) S_
 series below x = 2 (no cancellation), by the recurrence S_(p+2) = (1/p! - S_p) / x^2 above (each step divides the
 error by x^2 >= 4), with S2 = 2 sin^2(x/2) / x^2.
 
-Over a step the interface force is the cubic Hermite polynomial through its values and slopes
-at both ends, F(tau) = F0 H00 + F0' H10 + F1 H01 + F1' H11; `hermite_weights` gives, per mode,
-the end displacement and velocity per unit of each of the four (modal) Hermite data.
+Over a step the interface force is a polynomial of degree <= 3 in a basis H_b(tau), given by its
+Taylor rows at tau = 0: the basis through values (and slopes) at nodes (`interpolation_taylor`;
+the coupled solver's force models) or the cubic Hermite basis through values and slopes at both ends
+(`hermite_taylor`). `weights_at` gives, per mode, the displacement and velocity at tau per unit
+of each (modal) datum.
 """
 
 from __future__ import annotations
@@ -64,35 +66,58 @@ def hermite_taylor(h, out):
 
 
 @njit(cache=True)
-def hermite_values(T, tau, H, dH):
-    """The four cubic Hermite basis functions H_b(tau) and their slopes H_b'(tau), from their
-    Taylor rows T (`hermite_taylor`)."""
-    for b in range(4):
+def interpolation_taylor(nodes, orders, h, out):
+    """Taylor coefficients at tau = 0 (derivatives 0..3) of the interpolation basis on [0, h] for
+    the data "derivative orders[b] at tau = nodes[b] h" (at most four data): row b is the
+    polynomial whose datum b is 1 and whose other data are 0. Values at (0, 1) give the linear
+    force, at (0, 1/2, 1) the quadratic; value and slope at 0 with values at 1/2 and 1 the C1
+    cubic."""
+    nb = nodes.shape[0]
+    V = np.zeros((nb, nb))
+    for i in range(nb):
+        tau = nodes[i] * h
+        for k in range(orders[i], nb):
+            c = 1.0
+            for m in range(k - orders[i] + 1, k + 1):
+                c *= m
+            V[i, k] = c * tau ** (k - orders[i])
+    C = np.linalg.inv(V)  # column b: the monomial coefficients (in tau) of basis b
+    out[:, :] = 0.0
+    fact = 1.0
+    for k in range(nb):
+        if k > 1:
+            fact *= k
+        for b in range(nb):
+            out[b, k] = fact * C[k, b]
+
+
+@njit(cache=True)
+def basis_values(T, tau, H, dH):
+    """The basis functions H_b(tau) and their slopes H_b'(tau) from their Taylor rows T
+    (`hermite_taylor`, `interpolation_taylor`)."""
+    for b in range(T.shape[0]):
         H[b] = T[b, 0] + T[b, 1] * tau + 0.5 * T[b, 2] * tau * tau + T[b, 3] * tau**3 / 6.0
         dH[b] = T[b, 1] + T[b, 2] * tau + 0.5 * T[b, 3] * tau * tau
 
 
 @njit(cache=True)
-def weights_at(omega, h, tau, hom, wd, wv, wa):
-    """Modal weights at tau in a step of size h (the Hermite basis lives on [0, h]): the free
-    response hom (S0, tau S1, -w^2 tau S1) at w tau and, per Hermite datum b, the displacement
-    wd, velocity wv and acceleration wa of the mode at tau per unit modal datum."""
+def weights_at(omega, tau, T, hom, wd, wv):
+    """Modal weights at tau into a step under a force sum_b F_b H_b(tau), the basis given by its
+    Taylor rows T (nb, 4): the free response hom (S0, tau S1, -w^2 tau S1) at w tau and, per basis
+    datum b, the displacement wd and velocity wv of the mode at tau per unit modal datum."""
     S = np.empty(6)
-    T = np.empty((4, 4))
-    hermite_taylor(h, T)
     tp = np.empty(6)
     tp[0] = 1.0
     for p in range(1, 6):
         tp[p] = tp[p - 1] * tau
-    basis_at, slope_at = np.empty(4), np.empty(4)  # H_b(tau), H_b'(tau)
-    hermite_values(T, tau, basis_at, slope_at)
+    nb = T.shape[0]
     for i in range(omega.shape[0]):
         w = omega[i]
         oscillator_functions(w * tau, S)
         hom[i, 0] = S[0]
         hom[i, 1] = tau * S[1]
         hom[i, 2] = -w * w * tau * S[1]
-        for b in range(4):
+        for b in range(nb):
             d = 0.0
             v = 0.0
             for k in range(4):
@@ -100,7 +125,6 @@ def weights_at(omega, h, tau, hom, wd, wv, wa):
                 v += T[b, k] * tp[k + 1] * S[k + 1]
             wd[i, b] = d
             wv[i, b] = v
-            wa[i, b] = basis_at[b] - w * w * d  # eta'' = g - w^2 eta
 
 
 @njit(cache=True)
@@ -108,7 +132,9 @@ def hermite_weights(omega, h, hom, wd, wv):
     """Per mode i (omega[i]) over a step h: hom[i] = (S0, h S1, -w^2 h S1) for the free response,
     and wd[i, b], wv[i, b]: the end displacement and velocity per unit modal force of Hermite
     datum b (0: F0, 1: F0', 2: F1, 3: F1')."""
-    weights_at(omega, h, h, hom, wd, wv, np.empty_like(wd))
+    T = np.empty((4, 4))
+    hermite_taylor(h, T)
+    weights_at(omega, h, T, hom, wd, wv)
 
 
 def modal_step_cubic(omega, h, eta0, etad0, g):
@@ -119,6 +145,23 @@ def modal_step_cubic(omega, h, eta0, etad0, g):
     hom, wd, wv = np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 4))
     hermite_weights(omega, float(h), hom, wd, wv)
     g = np.asarray(g, float).reshape(4, n)
+    eta = hom[:, 0] * eta0 + hom[:, 1] * etad0 + np.einsum("ib,bi->i", wd, g)
+    etad = hom[:, 2] * eta0 + hom[:, 0] * etad0 + np.einsum("ib,bi->i", wv, g)
+    return eta, etad
+
+
+def modal_step_interpolated(omega, h, eta0, etad0, nodes, orders, data):
+    """End displacement and velocity of each mode after a step h under the force polynomial with
+    `data` (nb, nm): derivative orders[b] at nodes[b] h (`interpolation_taylor`). Reference
+    implementation (tests)."""
+    omega = np.asarray(omega, float)
+    nodes, orders = np.asarray(nodes, float), np.asarray(orders, np.int64)
+    n, nb = len(omega), len(nodes)
+    T = np.empty((nb, 4))
+    interpolation_taylor(nodes, orders, float(h), T)
+    hom, wd, wv = np.empty((n, 3)), np.empty((n, nb)), np.empty((n, nb))
+    weights_at(omega, float(h), T, hom, wd, wv)
+    g = np.asarray(data, float).reshape(nb, n)
     eta = hom[:, 0] * eta0 + hom[:, 1] * etad0 + np.einsum("ib,bi->i", wd, g)
     etad = hom[:, 2] * eta0 + hom[:, 0] * etad0 + np.einsum("ib,bi->i", wv, g)
     return eta, etad
