@@ -1,37 +1,39 @@
-"""The exact modal integrator of the shared core (the fast method's solid integrator): each retained
-mode is propagated in closed form under an interface force that is a polynomial over the step, the
-dropped high modes answer statically (residual flexibility), and the step size is error-controlled.
+"""The exact modal integrator of the shared core (the fast method's solid integrator): every mode
+is propagated in closed form under an interface force that is a polynomial over the step, and the
+step size is error-controlled.
 
-Over a step [t0, t0 + h] the contact points' displacement is
-    u(tau) = P eta(tau) + R F(tau),     eta_i'' + w_i^2 eta_i = (P' F(tau))_i,
-with P = B Phi over the retained modes (w_i <= w_cut) and R = B K^-1 B' - P W^-2 P' the static
-compliance of the dropped modes at the contacts. The force over the step is the Lagrange
-polynomial through its values at the nodes s_b h: the start value F0 (known) and the unknowns X,
-the forces at the other nodes. Two force models:
-  quadratic  nodes (0, 1/2, 1): the collocation points of the granules' RK4, so the solid feels a
-             force that agrees with the one the granules feel at every RK4 stage; the energy the
-             two sides exchange then agrees to the order of Simpson's rule (default);
-  linear     nodes (0, 1): the force taken as linear over the step (second order; for the
-             convergence studies).
+The solid's modes are the eigenmodes below the cut-off and the residual modes of the dropped ones
+(`coupling.solver.residual_modes`: Rayleigh-Ritz on the dropped modes' static shapes, so the
+static compliance at the contacts is exact and those shapes keep their inertia). Over a step
+[t0, t0 + h] the contacts move as
+    u(tau) = P eta(tau),     eta_i'' + w_i^2 eta_i = (P' F(tau))_i,
+and the force F(tau) is the Lagrange polynomial through its values at the nodes s_b h: the start
+value F0 (known) and the unknowns X, the forces at the other nodes. Two force models:
+  quadratic  nodes (0, 1/2, 1), the points where the granules' RK4 evaluates its stages: the solid
+             feels the force the granules feel at every stage, and the energy the two sides
+             exchange agrees to the order of Simpson's rule (default);
+  linear     nodes (0, 1): the force linear over the step (second order; for convergence studies).
 A force polynomial carries no memory from step to step: a contact that opens has F = 0 at every
-node and exerts nothing (a C1 cubic whose start slope is inherited from the previous step kept
-the slope of a contact's last loaded step after it opened, pushing and pulling the solid through
-an open contact; that broke Newton and leaked energy).
+node and exerts nothing. (A C1 cubic whose start slope came from the previous step kept the slope
+of a contact's last loaded step after it opened and pushed and pulled the solid through an open
+contact; a massless residual compliance R made the contacts' velocity R F' follow the force's
+slope, so that friction saw the slope with a gain R / h. Both broke Newton and leaked energy;
+docs/performance.md has the measurements.)
 
-`solid.propagation` gives each mode's displacement and velocity per unit force datum at each
-node, so the contacts' motion at the nodes is affine in X. The granules are integrated by RK4 under
-the cubic Hermite motion through the contacts' exact start and end displacements and velocities;
-the map X -> G(X) returns the contact law's forces (eqs. 2, 5) at the nodes, the granular state at
-an interior node by cubic Hermite interpolation of the step's ends and derivatives. Newton on
-X = G(X) uses the contact law's derivatives, with each contact granule's own response to leading
-order.
+`solid.propagation` gives each mode's displacement and velocity per unit force datum at each node,
+so the contacts' motion at the nodes is affine in X. The granules are integrated by RK4 under the
+polynomial through the contacts' exact displacements and velocities at the step's start and at
+every node (a cubic for the linear model, a quintic for the quadratic one); the map X -> G(X)
+returns the contact law's forces (eqs. 2, 5) at the nodes, the granular state at an interior node
+by cubic Hermite interpolation of the step's ends and derivatives. Newton on X = G(X) uses the
+contact law's derivatives and each contact granule's own response (`_granule_response`).
 
 Local error of the whole coupled step: the embedded third-order solution of classical RK4 with the
 end-of-step derivative (FSAL weights (1, 2, 2, 0, 1)/6, err = h/6 (k4 - k5) per RK4 sub-step) on
 the granules' velocities and spin velocities against atol + rtol v_ref, and the step's defect of
 the energy ledger (13) against its share h / T of ledger_tol e_ref. A PI controller picks the next
-step on a geometric grid h_k = h_max 2^(-k/4) (so the per-step operators are cached), and a step
-never crosses a load's kink.
+step on a geometric grid h_k = h_max 2^(-k/4) (so the per-step operators are cached), a step never
+crosses a load's kink, and outputs come by dense output inside the step that passes them.
 """
 
 from __future__ import annotations
@@ -50,16 +52,12 @@ from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
 GRID_PER_OCTAVE = 4
-# force models over a step: the data (derivative order at node s h); the first `known` data come
-# from the step's start, the others are the unknowns, one force value per node
-FORCE_MODELS = {"linear": ((0.0, 1.0), (0, 0), 1), "quadratic": ((0.0, 0.5, 1.0), (0, 0, 0), 1),
-                "cubic": ((0.0, 0.0, 0.5, 1.0), (0, 1, 0, 0), 2)}
+FORCE_NODES = {"quadratic": (0.0, 0.5, 1.0), "linear": (0.0, 1.0)}
 
 
 class ExactSolid(NamedTuple):
-    """The solid's modes as the integrator propagates them (the retained eigenmodes, then the
-    residual modes of the dropped ones: `coupling.solver.residual_modes`): omega (nr,), the
-    contacts' modal matrix P = B Phi (2nc, nr), and the contacts' frame."""
+    """The solid's modes as the integrator propagates them (retained eigenmodes, then residual
+    modes): omega (nr,), the contacts' modal matrix P = B Phi (2nc, nr), and the contacts' frame."""
 
     omega: np.ndarray
     P: np.ndarray
@@ -67,17 +65,14 @@ class ExactSolid(NamedTuple):
 
 
 class OpsCache(NamedTuple):
-    """The force model (`FORCE_MODELS`: its data are derivative orders[b] at nodes[b] h, the first
-    `known` of them from the step's start, the others the forces at the unknown nodes, the last at
-    the step's end) and, per step size h (grid level k: h_max 2^(-k/4); the last slot for an
-    off-grid step cut at a load's kink), computed on first use: the basis's Taylor rows T, the
-    modes' free-response weights at each unknown node (hom), their end displacement and velocity
-    per unit modal datum (wd, wv), and the contacts' displacement and velocity at each unknown node
-    j per unit force datum b (Cu, Cw), the residual compliance included."""
+    """The force model's nodes (nb,: 0, then the nn = nb - 1 unknown nodes, the last at 1) and, per
+    step size h (grid level k: h_max 2^(-k/4); the last slot for an off-grid step cut at a load's
+    kink), computed on first use: the Lagrange basis's Taylor rows T, the modes' free-response
+    weights at each unknown node (hom), their end displacement and velocity per unit modal datum
+    (wd, wv), the contacts' displacement and velocity at each unknown node j per unit force datum b
+    (Cu, Cw), and the basis's first and second integrals from the start to each unknown node."""
 
     nodes: np.ndarray  # (nb,)
-    orders: np.ndarray  # (nb,) int
-    known: int
     ready: np.ndarray  # (L+1,) bool
     T: np.ndarray  # (L+1, nb, 4)
     hom: np.ndarray  # (L+1, nn, nr, 3)
@@ -85,18 +80,18 @@ class OpsCache(NamedTuple):
     wv: np.ndarray
     Cu: np.ndarray  # (L+1, nn, nb, 2nc, 2nc)
     Cw: np.ndarray
-    I1: np.ndarray  # (L+1, nn, nb): the basis's integral from 0 to each unknown node ...
-    I2: np.ndarray  # ... and its double integral
+    I1: np.ndarray  # (L+1, nn, nb)
+    I2: np.ndarray
 
 
 def ops_cache(model: str, levels: int, nr: int, nc: int) -> OpsCache:
     """An empty operator cache of a force model for `levels` grid levels plus the off-grid slot."""
-    nodes, orders, known = FORCE_MODELS[model]
+    nodes = np.asarray(FORCE_NODES[model], float)
     nb, L, m2 = len(nodes), levels + 2, 2 * nc
-    nn = nb - known
-    return OpsCache(np.asarray(nodes, float), np.asarray(orders, np.int64), int(known), np.zeros(L, bool),
-                    np.zeros((L, nb, 4)), np.zeros((L, nn, nr, 3)), np.zeros((L, nr, nb)), np.zeros((L, nr, nb)),
-                    np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb)), np.zeros((L, nn, nb)))
+    nn = nb - 1
+    return OpsCache(nodes, np.zeros(L, bool), np.zeros((L, nb, 4)), np.zeros((L, nn, nr, 3)), np.zeros((L, nr, nb)),
+                    np.zeros((L, nr, nb)), np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb, m2, m2)), np.zeros((L, nn, nb)),
+                    np.zeros((L, nn, nb)))
 
 
 class ExactConfig(NamedTuple):
@@ -118,29 +113,26 @@ class ExactConfig(NamedTuple):
 
 
 class ExactState(NamedTuple):
-    """The state at the current time: y, the granules' derivative dy, the modes (eta, eta'), the
-    interface force F on the solid (nc, 2) and its slope Fd, their modal projections q = P'F and
-    qd = P'Fd, the contacts' displacement u (2nc,) and the retained modes' part of their velocity
-    w = P eta' (the dropped modes add R F'), |N| and v_t; and the last step, for dense output and
-    the next step's predictor: its start (suffix 0), its force data Fs (nb, nc, 2) with their
-    projections qs (nb, nr) and basis Ts (nb, 4), and the contacts' motion over it. clock = [t,
-    t0, err_prev, friction rate of the last step, energy ledger (13), its initial value, the
-    controller's continuous level]; meta = [grid level of the next step, rejected]."""
+    """The state at the current time: y and the granules' derivative dy there (the next step's
+    first RK4 stage), the modes (eta, eta'), the interface force F on the solid (nc, 2) and its
+    modal projection q = P'F, the contacts' displacement u and velocity w (2nc,), |N| and v_t; and
+    the last step, for dense output and the next step's predictor: its start (suffix 0), its force
+    data Fs (nb, nc, 2) at the nodes (Fs[-1] is F) with their projections qs (nb, nr) and basis Ts
+    (nb, 4), and the contacts' motion over it. clock = [t, t0, err_prev, friction rate of the last
+    step, energy ledger (13), its initial value, the controller's continuous level];
+    meta = [grid level of the next step, rejected]."""
 
     y: np.ndarray
     dy: np.ndarray
     eta: np.ndarray
     etad: np.ndarray
     F: np.ndarray
-    Fd: np.ndarray
     q: np.ndarray
-    qd: np.ndarray
     u: np.ndarray
     w: np.ndarray
     normal: np.ndarray
     vrel: np.ndarray
     y0: np.ndarray
-    dy0: np.ndarray
     eta0: np.ndarray
     etad0: np.ndarray
     Fs: np.ndarray
@@ -154,13 +146,15 @@ class ExactState(NamedTuple):
 def initial_state(y, dy, nr: int, nc: int, nb: int, ledger: float, level: int) -> ExactState:
     """The state at t = 0: the solid at rest, no interface force."""
     z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
-    return ExactState(y, dy, z(nr), z(nr), zc(), zc(), z(nr), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), dy.copy(),
-                      z(nr), z(nr), np.zeros((nb, nc, 2)), np.zeros((nb, nr)), np.zeros((nb, 4)),
-                      Motion(zc(), zc(), zc(), zc(), zc(), zc()),
+    return ExactState(y, dy, z(nr), z(nr), zc(), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), z(nr), z(nr),
+                      np.zeros((nb, nc, 2)), np.zeros((nb, nr)), np.zeros((nb, 4)), Motion(zc(), zc(), zc(), zc(), zc(), zc()),
                       np.array([0.0, 0.0, 1e-4, 0.0, ledger, ledger, float(level)]), np.array([level, 0], np.int64))
 
 
 class Work(NamedTuple):
+    """Scratch of one step: the trial granular state, RK4 stages and error, the contacts at the
+    nodes, the unknowns and the map's values, Newton's system, the modal data of the trial."""
+
     ytr: np.ndarray
     rk4: np.ndarray  # (5, len(y))
     k5: np.ndarray
@@ -169,26 +163,24 @@ class Work(NamedTuple):
     motion: Motion
     un: np.ndarray  # (nn, 2nc) the contacts at the unknown nodes ...
     wn: np.ndarray
-    uf: np.ndarray  # ... and their free parts (no force data)
+    uf: np.ndarray  # ... and their part that does not depend on X (free response and F0's share)
     wf: np.ndarray
-    D: np.ndarray  # (nb, 2nc) the step's force data
-    k1: np.ndarray  # the granules' derivative at the step's start (RK4's first stage)
     X: np.ndarray  # (nn 2nc,) unknowns: the forces at the unknown nodes, node-major
     Xprev: np.ndarray  # before the last Newton step
     G: np.ndarray
-    J: np.ndarray  # (nn 2nc, nn 2nc)
     r: np.ndarray
     iface0: InterfaceForces  # at the first unknown node ...
     iface1: InterfaceForces  # ... and at the second (quadratic model)
     ww: np.ndarray  # (nr, 2 nn) modal scratch
     rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
     parts: np.ndarray  # (2,): the last step's scaled velocity error and energy-ledger defect
-    qdat: np.ndarray  # (nb, nr): the modal force data of the trial step (P'F, P'Fd known; P' X)
+    qdat: np.ndarray  # (nb, nr): the modal force data of the trial step (P'F0, P'X)
     eta1: np.ndarray  # (nr,): the modes at the trial step's end
     etad1: np.ndarray
     inv_m: np.ndarray  # (nc,): 1/m and R^2/I of each contact's granule
     spin: np.ndarray
-    # Newton's scratch: the step, the touching contacts' system and each contact's local problems
+    # Newton: the rows of -dG/dX, the touching contacts' factorised system, local problems
+    J: np.ndarray  # (nn 2nc, nn 2nc)
     dX: np.ndarray
     touching: np.ndarray  # (nc,) bool
     idx: np.ndarray  # (nn 2nc,) int: the touching unknowns
@@ -201,7 +193,7 @@ class Work(NamedTuple):
     Ai: np.ndarray
     rows: np.ndarray  # (2nn, nn 2nc)
     col: np.ndarray
-    ls: np.ndarray  # (nn,) local friction problem
+    ls: np.ndarray  # (nn,) the local friction problem
     ls0: np.ndarray
     lvt: np.ndarray
     lN: np.ndarray
@@ -211,17 +203,18 @@ class Work(NamedTuple):
 
 
 @njit(cache=True)
-def work_for(y, nc, nr, nb, nn):
+def work_for(y, nc, nr, nb):
     m2 = 2 * nc
+    nn = nb - 1
     n = nn * m2
+    v = lambda k: np.zeros(k)  # noqa: E731
     return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
-                motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)),
-                np.zeros((nb, m2)), np.empty_like(y), np.zeros(nn * m2), np.zeros(nn * m2), np.zeros(nn * m2), np.zeros((nn * m2, nn * m2)), np.zeros(nn * m2), interface_buffers(nc),
-                interface_buffers(nc), np.zeros((nr, 2 * nn)), np.zeros(1), np.zeros(2), np.zeros((nb, nr)), np.zeros(nr), np.zeros(nr),
-                np.zeros(nc), np.zeros(nc), np.zeros(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64), np.zeros(1, np.int64), np.zeros(n, np.int64),
-                np.zeros(n, np.int64),
-                np.zeros((n, n)), np.zeros(n), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), np.zeros(2 * nn),
-                np.zeros(nn), np.zeros(nn), np.zeros(nn), np.zeros(nn), np.zeros((nn, nn)), np.zeros(2), np.zeros((2, 2)))
+                motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), v(n), v(n),
+                v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((nr, 2 * nn)), v(1), v(2), np.zeros((nb, nr)),
+                v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64),
+                np.zeros(1, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros((n, n)), v(n),
+                np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), v(2 * nn), v(nn), v(nn), v(nn),
+                v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)))
 
 
 @njit(cache=True, inline="always")
@@ -234,34 +227,26 @@ def node_iface(w, j):
 
 
 @njit(cache=True)
-def _contact_operator(P, weight, out):
-    """out = P diag(weight) P' (a matrix product: BLAS)."""
-    out[:, :] = np.dot(P * weight, P.T)
-
-
-@njit(cache=True)
 def ensure_ops(cache, solid, slot, h):
     """Fill `cache` slot `slot` for step size h (once per grid level; always for the off-grid slot):
-    per unknown node j at tau_j the modes' free response and the contacts' displacement and
-    velocity per unit force datum, P diag(wd_b) P' + H_b(tau_j) R (the dropped modes follow the
-    force statically), and the modes' end weights."""
+    per unknown node j at tau_j the modes' free response, the contacts' displacement and velocity
+    per unit force datum, P diag(wd_b) P' and P diag(wv_b) P', and the basis's integrals; and the
+    modes' end weights."""
     if cache.ready[slot]:
         return
     omega, P = solid.omega, solid.P
-    nodes, k0 = cache.nodes, cache.known
+    nodes = cache.nodes
     nb = nodes.shape[0]
     nr = omega.shape[0]
-    m2 = P.shape[0]
     T = cache.T[slot]
-    interpolation_taylor(nodes, cache.orders, h, T)
+    interpolation_taylor(nodes, np.zeros(nb, np.int64), h, T)
     wd, wv = np.empty((nr, nb)), np.empty((nr, nb))
-    H, dH = np.empty(nb), np.empty(nb)
-    col = np.empty(nr)
-    for j in range(nb - k0):
-        tau = nodes[k0 + j] * h
+    for j in range(nb - 1):
+        tau = nodes[j + 1] * h
         weights_at(omega, tau, T, cache.hom[slot, j], wd, wv)
-        basis_values(T, tau, H, dH)
         for b in range(nb):
+            cache.Cu[slot, j, b, :, :] = np.dot(P * wd[:, b].copy(), P.T)
+            cache.Cw[slot, j, b, :, :] = np.dot(P * wv[:, b].copy(), P.T)
             i1 = 0.0
             i2 = 0.0
             fact = 1.0
@@ -271,12 +256,6 @@ def ensure_ops(cache, solid, slot, h):
                 i2 += T[b, k] * tau ** (k + 2) / (fact * (k + 2))
             cache.I1[slot, j, b] = i1
             cache.I2[slot, j, b] = i2
-            for i in range(nr):
-                col[i] = wd[i, b]
-            _contact_operator(P, col, cache.Cu[slot, j, b])
-            for i in range(nr):
-                col[i] = wv[i, b]
-            _contact_operator(P, col, cache.Cw[slot, j, b])
     cache.wd[slot, :, :] = wd  # the last node is the step's end
     cache.wv[slot, :, :] = wv
     cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
@@ -284,14 +263,15 @@ def ensure_ops(cache, solid, slot, h):
 
 @njit(cache=True)
 def free_response(st, solid, cache, slot, w):
-    """The contacts' displacement and velocity at each unknown node with no force data (w.uf,
-    w.wf): P applied to the modes' free response."""
+    """The part of the contacts' displacement and velocity at each unknown node that does not
+    depend on X (w.uf, w.wf): P applied to the modes' free response, plus the start force's
+    share."""
     nr = st.eta.shape[0]
-    nn = cache.nodes.shape[0] - cache.known
+    m2 = st.u.shape[0]
+    nn = cache.nodes.shape[0] - 1
     if nr == 0:
         w.uf[:, :] = 0.0
         w.wf[:, :] = 0.0
-        _known_share(st, cache, slot, w)
         return
     ww = w.ww
     for j in range(nn):
@@ -301,71 +281,42 @@ def free_response(st, solid, cache, slot, w):
             ww[i, 2 * j + 1] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
     out = np.dot(solid.P, ww)
     for j in range(nn):
-        w.uf[j, :] = out[:, 2 * j]
-        w.wf[j, :] = out[:, 2 * j + 1]
-    _known_share(st, cache, slot, w)
-
-
-@njit(cache=True)
-def _known_share(st, cache, slot, w):
-    """Add the known force data's share (start force, and slope) to the contacts' free motion at
-    the unknown nodes: it does not change over the step's iterations."""
-    m2 = st.u.shape[0]
-    k0 = cache.known
-    nn = cache.nodes.shape[0] - k0
-    for j in range(nn):
-        Cu, Cw = cache.Cu[slot, j], cache.Cw[slot, j]
-        for b in range(k0):
-            for r in range(m2):
-                u = 0.0
-                v = 0.0
-                for q in range(m2):
-                    x = st.F[q // 2, q % 2] if b == 0 else st.Fd[q // 2, q % 2]
-                    u += Cu[b, r, q] * x
-                    v += Cw[b, r, q] * x
-                w.uf[j, r] += u
-                w.wf[j, r] += v
-
-
-@njit(cache=True)
-def gather_data(st, X, known, D):
-    """D (nb, 2nc): the step's force data, the known ones from the start (force, and slope for the
-    C1 model) and the unknown nodes' forces X."""
-    m2 = st.u.shape[0]
-    for r in range(m2):
-        D[0, r] = st.F[r // 2, r % 2]
-        if known > 1:
-            D[1, r] = st.Fd[r // 2, r % 2]
-    for b in range(known, D.shape[0]):
+        Cu, Cw = cache.Cu[slot, j, 0], cache.Cw[slot, j, 0]
         for r in range(m2):
-            D[b, r] = X[(b - known) * m2 + r]
+            u = out[r, 2 * j]
+            v = out[r, 2 * j + 1]
+            for q in range(m2):
+                f0 = st.F[q // 2, q % 2]
+                u += Cu[r, q] * f0
+                v += Cw[r, q] * f0
+            w.uf[j, r] = u
+            w.wf[j, r] = v
 
 
 # ---------------------------------------------------------------- the interface map
 
 
 @njit(cache=True)
-def _motion_at_nodes(st, solid, cache, slot, h, w):
+def _motion_at_nodes(st, cache, slot, h, w):
     """For the unknowns w.X: the contacts' displacement and velocity at every unknown node (affine
-    in the force data), and the motion the granules' RK4 sees: the polynomial through the exact
-    displacements and velocities at the start and at every node, so that the forces at the nodes
-    are the ones the granules feel there. The start velocity is the modes' plus the dropped modes'
-    R F'(0) of this step's force (the force's slope may jump between steps)."""
+    in X), and the motion the granules' RK4 sees: the polynomial through the exact displacements
+    and velocities at the step's start and at every node, so that the forces at the nodes are the
+    ones the granules feel there."""
     m2 = st.u.shape[0]
-    nb, k0 = cache.nodes.shape[0], cache.known
-    nn = nb - k0
-    D = w.D
-    gather_data(st, w.X, k0, D)
-    for j in range(nn):  # the known data's share is in uf, wf (`free_response`)
+    nb = cache.nodes.shape[0]
+    nn = nb - 1
+    X = w.X
+    for j in range(nn):
         Cu, Cw = cache.Cu[slot, j], cache.Cw[slot, j]
         for r in range(m2):
             u = w.uf[j, r]
             v = w.wf[j, r]
-            for b in range(k0, nb):
+            for b in range(1, nb):
                 for q in range(m2):
-                    if D[b, q] != 0.0:
-                        u += Cu[b, r, q] * D[b, q]
-                        v += Cw[b, r, q] * D[b, q]
+                    x = X[(b - 1) * m2 + q]
+                    if x != 0.0:
+                        u += Cu[b, r, q] * x
+                        v += Cw[b, r, q] * x
             w.un[j, r] = u
             w.wn[j, r] = v
     e = nn - 1
@@ -397,20 +348,21 @@ def _motion_at_nodes(st, solid, cache, slot, h, w):
 
 
 @njit(cache=True)
-def _rk4_with_estimate(y, t, h, model, motion, rate, w):
-    """RK4 (sub-stepped where friction is stiff) from y into w.ytr, the end derivative in w.k5
-    and the embedded third-order error h/6 (k4 - k5) summed over sub-steps in w.err. False if the
-    state stops being finite."""
+def _rk4_with_estimate(st, t, h, model, motion, rate, w):
+    """RK4 (sub-stepped where friction is stiff) from the step's start into w.ytr, the first
+    stage being the state's derivative st.dy (first same as last: the contacts start where the
+    last step left them), the end derivative in w.k5 and the embedded third-order error
+    h/6 (k4 - k5) summed over sub-steps in w.err. False if the state stops being finite."""
     m = max(1, int(math.ceil(rate * h / 2.0)))
     s = h / m
-    w.ytr[:] = y
+    w.ytr[:] = st.y
     w.err[:] = 0.0
     n = w.ytr.shape[0]
     for k in range(m):
-        if not rk4_step(w.ytr, t + k * s, s, model, motion, k * s, w.rk4):
-            return False
         if k == 0:
-            w.k1[:] = w.rk4[0]
+            w.rk4[0, :] = st.dy
+        if not rk4_step(w.ytr, t + k * s, s, model, motion, k * s, w.rk4, k == 0):
+            return False
         rhs(t + (k + 1) * s, w.ytr, w.k5, model, motion, (k + 1) * s)
         k4 = w.rk4[3]
         for q in range(n):
@@ -419,18 +371,18 @@ def _rk4_with_estimate(y, t, h, model, motion, rate, w):
 
 
 @njit(cache=True)
-def force_map(st, t, h, model, solid, cache, slot, rate, w, derivatives):
+def force_map(st, t, h, model, cache, slot, rate, w, derivatives):
     """X -> G(X): the forces at the unknown nodes after RK4 of the granules under the contacts'
     motion that X implies. Fills w.G, the nodes' interface buffers (with the law's derivatives if
     asked), w.ytr, w.k5, w.err. False if the granular state stopped being finite."""
-    _motion_at_nodes(st, solid, cache, slot, h, w)
-    if not _rk4_with_estimate(st.y, t, h, model, w.motion, rate, w):
+    _motion_at_nodes(st, cache, slot, h, w)
+    if not _rk4_with_estimate(st, t, h, model, w.motion, rate, w):
         return False
     nc = st.F.shape[0]
     m2 = 2 * nc
-    nodes, k0 = cache.nodes, cache.known
-    for j in range(nodes.shape[0] - k0):
-        s = nodes[k0 + j]
+    nodes = cache.nodes
+    for j in range(nodes.shape[0] - 1):
+        s = nodes[j + 1]
         yj = w.ytr
         if s < 1.0:
             # the granules at an interior node: the cubic Hermite through the step's ends and their
@@ -438,7 +390,7 @@ def force_map(st, t, h, model, solid, cache, slot, rate, w, derivatives):
             h00, h10 = (2.0 * s - 3.0) * s * s + 1.0, ((s - 2.0) * s + 1.0) * s * h
             h01, h11 = (3.0 - 2.0 * s) * s * s, (s - 1.0) * s * s * h
             for q in range(w.ynode.shape[0]):
-                w.ynode[q] = h00 * st.y[q] + h10 * w.k1[q] + h01 * w.ytr[q] + h11 * w.k5[q]
+                w.ynode[q] = h00 * st.y[q] + h10 * st.dy[q] + h01 * w.ytr[q] + h11 * w.k5[q]
             yj = w.ynode
         iface = node_iface(w, j)
         interface_forces(yj, model, w.un[j].reshape(nc, 2), w.wn[j].reshape(nc, 2), iface, derivatives)
@@ -447,16 +399,19 @@ def force_map(st, t, h, model, solid, cache, slot, rate, w, derivatives):
     return True
 
 
+# ---------------------------------------------------------------- Newton on X = G(X)
+
+
 @njit(cache=True)
-def _jacobian_rows(M, rows, c, iface, Cu, Cw, known):
+def _jacobian_rows(M, rows, c, iface, Cu, Cw):
     """Contact c's two rows (at rows, rows + 1) of M = -dG/dX at fixed granules for one unknown
     node: its forces move with the node's displacement (Du) and velocity (Dw), which move with
-    each unknown force datum b through Cu[b], Cw[b]."""
+    each unknown force datum b >= 1 through Cu[b], Cw[b]."""
     m2 = Cu.shape[1]
     nb = Cu.shape[0]
     Du, Dw = iface.Du, iface.Dw
-    for b in range(known, nb):
-        col0 = (b - known) * m2
+    for b in range(1, nb):
+        col0 = (b - 1) * m2
         for q in range(m2):
             for d in range(2):
                 M[rows + d, col0 + q] = -(Du[c, d, 0] * Cu[b, 2 * c, q] + Du[c, d, 1] * Cu[b, 2 * c + 1, q]
@@ -471,8 +426,7 @@ def _granule_response(w, cache, slot, c, tangent, A):
     the basis's first and second integrals from the step's start; M^-1 = I/m + t t' R^2/I, the spin
     carrying the tangential part), which changes the forces by Dg dG. The granule's other
     contacts are left out (the paper's Assumption 3 drops the whole response)."""
-    k0 = cache.known
-    nn = cache.nodes.shape[0] - k0
+    nn = cache.nodes.shape[0] - 1
     tx, ty = tangent[c, 0], tangent[c, 1]
     im, sp = w.inv_m[c], w.spin[c]
     Mi00, Mi01, Mi11 = im + sp * tx * tx, sp * tx * ty, im + sp * ty * ty
@@ -480,7 +434,7 @@ def _granule_response(w, cache, slot, c, tangent, A):
         iface = node_iface(w, j)
         Du, Dw = iface.Du, iface.Dw
         for b in range(nn):
-            i1, i2 = cache.I1[slot, j, k0 + b], cache.I2[slot, j, k0 + b]
+            i1, i2 = cache.I1[slot, j, 1 + b], cache.I2[slot, j, 1 + b]
             for d in range(2):
                 g0 = Du[c, d, 0] * im * i2 + (Dw[c, d, 0] * Mi00 + Dw[c, d, 1] * Mi01) * i1
                 g1 = Du[c, d, 1] * im * i2 + (Dw[c, d, 0] * Mi01 + Dw[c, d, 1] * Mi11) * i1
@@ -489,29 +443,33 @@ def _granule_response(w, cache, slot, c, tangent, A):
 
 
 @njit(cache=True)
+def _friction_residual(s, s0, vt0, normal, B, mu, ks, out):
+    """The local friction model's residual s_j - mu N_j tanh(k_s vt_j(s)), vt_j(s) =
+    vt0_j - sum_b B_jb (s_b - s0_b); returns its squared norm."""
+    total = 0.0
+    nn = s.shape[0]
+    for j in range(nn):
+        vt = vt0[j]
+        for b in range(nn):
+            vt -= B[j, b] * (s[b] - s0[b])
+        out[j] = s[j] - mu * normal[j] * math.tanh(ks * vt)
+        total += out[j] * out[j]
+    return total
+
+
+@njit(cache=True)
 def local_friction_solve(s, s0, vt0, normal, B, law, r, Jl):
-    """The tangential forces s (nn,) at a contact's unknown nodes that its local friction model
-    holds fixed: s_j = mu N_j tanh(k_s vt_j), vt_j = vt0_j - sum_b B_jb (s_b - s0_b), B the
+    """The tangential forces s (nn <= 2,) at a contact's unknown nodes that its local friction
+    model holds fixed: s_j = mu N_j tanh(k_s vt_j), vt_j = vt0_j - sum_b B_jb (s_b - s0_b), B the
     tangential velocity's response to the tangential forces (solid and granule); s comes in as the
     Newton update and leaves as the root (damped Newton, each s_j within +-mu N_j). Where the tanh
     is steep, Newton's linear model overshoots it; this keeps the nodes' coupling that a root for
     one node at a time would break."""
     nn = s.shape[0]
     mu, ks = law.mu, law.k_s
-
-    def resid(s, out):
-        total = 0.0
-        for j in range(nn):
-            vt = vt0[j]
-            for b in range(nn):
-                vt -= B[j, b] * (s[b] - s0[b])
-            out[j] = s[j] - mu * normal[j] * math.tanh(ks * vt)
-            total += out[j] * out[j]
-        return total
-
     trial = np.empty(2)
     rt = np.empty(2)
-    norm = resid(s, r)
+    norm = _friction_residual(s, s0, vt0, normal, B, mu, ks, r)
     scale = 0.0
     for j in range(nn):
         scale = max(scale, mu * normal[j])
@@ -536,14 +494,14 @@ def local_friction_solve(s, s0, vt0, normal, B, law, r, Jl):
         while True:
             for j in range(nn):
                 trial[j] = min(mu * normal[j], max(-mu * normal[j], s[j] - lam * (ds0 if j == 0 else ds1)))
-            tn = resid(trial, rt)
+            tn = _friction_residual(trial[:nn], s0, vt0, normal, B, mu, ks, rt)
             if tn < norm or lam < 1e-6:
                 break
             lam *= 0.5
-        s[:] = trial
-        r[:nn] = rt
         if tn >= norm:
             return
+        s[:] = trial[:nn]
+        r[:nn] = rt[:nn]
         norm = tn
 
 
@@ -566,10 +524,9 @@ def _touching(w, nc, nn):
 def _newton_matrix(w, cache, slot, frame):
     """I - dG/dX on the touching contacts' unknowns, factorised into w.Ma (their indices in w.idx,
     their count in w.na): dG/dX from the contact law's derivatives (`_jacobian_rows`) and each
-    contact granule's own response (`_granule_response`); the full rows in w.J (for the open
-    contacts' columns). False if singular."""
-    k0 = cache.known
-    nn = cache.nodes.shape[0] - k0
+    contact granule's own response (`_granule_response`), dG = (I - Dg)^-1 (dG at fixed granules);
+    the full rows in w.J (for the open contacts' columns). False if singular."""
+    nn = cache.nodes.shape[0] - 1
     m2 = w.un.shape[1]
     nc = m2 // 2
     n = nn * m2
@@ -586,9 +543,10 @@ def _newton_matrix(w, cache, slot, frame):
         if not w.touching[c]:
             continue
         for j in range(nn):
-            _jacobian_rows(rows, 2 * j, c, node_iface(w, j), cache.Cu[slot, j], cache.Cw[slot, j], k0)
+            _jacobian_rows(rows, 2 * j, c, node_iface(w, j), cache.Cu[slot, j], cache.Cw[slot, j])
         _granule_response(w, cache, slot, c, frame.tangent, A)
-        core.lu_factor(A, 2 * nn, piv)
+        if not core.lu_factor(A, 2 * nn, piv):
+            return False
         Ai = w.Ai
         for i in range(2 * nn):  # A^-1, column by column
             for k in range(2 * nn):
@@ -617,8 +575,7 @@ def _newton_step(w, cache, slot, frame, law):
     zero, and the system is solved for the touching contacts only. Then, where a contact's
     friction is stiff (its local map is not contractive, the paper's |lambda| > 1), its tangential
     forces at all nodes come from the root of its local friction model (`local_friction_solve`)."""
-    k0 = cache.known
-    nn = cache.nodes.shape[0] - k0
+    nn = cache.nodes.shape[0] - 1
     m2 = w.un.shape[1]
     nc = m2 // 2
     n = nn * m2
@@ -654,8 +611,8 @@ def _newton_step(w, cache, slot, frame, law):
             vt0[j] = iface.vrel[c]
             N[j] = max(iface.normal[c], 0.0)
             for b in range(nn):
-                B[j, b] = core.tangential_compliance(cache.Cw[slot, j, k0 + b], c, tx, ty) \
-                    + (w.inv_m[c] + w.spin[c]) * cache.I1[slot, j, k0 + b]
+                B[j, b] = core.tangential_compliance(cache.Cw[slot, j, 1 + b], c, tx, ty) \
+                    + (w.inv_m[c] + w.spin[c]) * cache.I1[slot, j, 1 + b]
             if N[j] > 0.0 and friction_map_slope(law.mu, law.k_s, N[j], 0.0, B[j, j]) > 1.0:
                 stiff = True
         if not stiff or not frame.has_tangent[c]:
@@ -663,26 +620,26 @@ def _newton_step(w, cache, slot, frame, law):
         local_friction_solve(s, s0, vt0, N, B, law, w.lr, w.lJ)
         for j in range(nn):
             k = j * m2 + 2 * c
-            st_ = w.X[k] * tx + w.X[k + 1] * ty
-            w.X[k] += (s[j] - st_) * tx
-            w.X[k + 1] += (s[j] - st_) * ty
+            now = w.X[k] * tx + w.X[k + 1] * ty
+            w.X[k] += (s[j] - now) * tx
+            w.X[k + 1] += (s[j] - now) * ty
 
 
 @njit(cache=True)
 def predict(st, cache, h, X):
     """The unknowns' first guess: the last step's force polynomial continued into the new step
     (the current force where that step is much shorter than the new one, or at the start)."""
-    nodes, k0 = cache.nodes, cache.known
+    nodes = cache.nodes
     nb = nodes.shape[0]
     m2 = st.u.shape[0]
     hp = st.clock[0] - st.clock[1]
     H, dH = np.empty(nb), np.empty(nb)
-    for j in range(nb - k0):
+    for j in range(nb - 1):
         if hp <= 0.0 or h > 2.0 * hp:
             for r in range(m2):
                 X[j * m2 + r] = st.F[r // 2, r % 2]
             continue
-        basis_values(st.Ts, hp + nodes[k0 + j] * h, H, dH)
+        basis_values(st.Ts, hp + nodes[j + 1] * h, H, dH)
         for r in range(m2):
             acc = 0.0
             for b in range(nb):
@@ -696,7 +653,8 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
     iterations); on success w holds the end state."""
     nc = st.F.shape[0]
     m2 = 2 * nc
-    n = (cache.nodes.shape[0] - cache.known) * m2
+    nn = cache.nodes.shape[0] - 1
+    n = nn * m2
     predict(st, cache, h, w.X)
     mo = w.motion
     for c in range(nc):
@@ -712,20 +670,20 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
     last = np.inf
     backtracks = 0
     for it in range(1, cfg.max_iterations + 1):
-        if not force_map(st, t, h, model, solid, cache, slot, rate, w, cfg.newton):
+        if not force_map(st, t, h, model, cache, slot, rate, w, cfg.newton):
             return core.NON_FINITE, it
         if solid.frame.fixed:
             w.X[:] = w.G
             return core.CONVERGED, it
         ok = True
-        worst = 0.0  # the residual against the tolerance
+        worst = 0.0  # the largest residual against its tolerance
         for r in range(n):
             ratio = abs(w.G[r] - w.X[r]) / (cfg.abstol + cfg.reltol * abs(w.X[r]))
             worst = max(worst, ratio)
             if ratio > 1.0:
                 ok = False
-        # at the round-off floor (tiny steps amplify it: the contacts' velocity moves with the
-        # force's slope) Newton stalls; a stalled residual within 100 tolerances is converged
+        # at the round-off floor (tiny steps amplify it) Newton stalls: a stalled residual within
+        # 100 tolerances is converged
         if not ok and it > 1 and worst <= 100.0 and worst > 0.5 * last:
             ok = True
         if not ok and cfg.newton and worst > 2.0 * last and backtracks < 6:
@@ -742,9 +700,9 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
             if ok:
                 return core.CONVERGED, it
             continue
-        # the matrix of the step's first iterate serves the later ones (a chord Newton: the same
+        # the matrix of the step's first iterate serves the later ones (a chord Newton: as few
         # iterations as a fresh matrix each time, measured), unless a contact opened or closed
-        if _touching(w, nc, n // m2) or it == 1:
+        if _touching(w, nc, nn) or it == 1:
             if not _newton_matrix(w, cache, slot, solid.frame):
                 return core.NO_CONVERGENCE, it
         w.Xprev[:] = w.X
@@ -771,17 +729,14 @@ def propagate_mode(hom, wd, wv, i, eta0, etad0, qdat):
 @njit(cache=True)
 def trial_ledger(st, solid, cache, slot, model, w):
     """E_solid + E_granular + D - W (eq. 13) at the end of the trial step: the modes' energy from
-    their exact end state (the modal data kept in w for the accept), the dropped modes' static
-    energy 1/2 F1' R F1, the granules' energy (11) and the ledger's accumulators."""
+    their exact end state (kept in w with the modal data, for the accept), the granules' energy
+    (11) and the ledger's accumulators."""
     m2 = st.u.shape[0]
     nr = st.eta.shape[0]
-    nb, k0 = cache.nodes.shape[0], cache.known
-    nn = nb - k0
+    nn = cache.nodes.shape[0] - 1
     if nr > 0:
         w.qdat[0, :] = st.q
-        if k0 > 1:
-            w.qdat[1, :] = st.qd
-        w.qdat[k0:, :] = np.dot(w.X.reshape(nn, m2), solid.P)
+        w.qdat[1:, :] = np.dot(w.X.reshape(nn, m2), solid.P)
     hom = cache.hom[slot, nn - 1]
     wd, wv = cache.wd[slot], cache.wv[slot]
     es = 0.0
@@ -790,14 +745,13 @@ def trial_ledger(st, solid, cache, slot, model, w):
         w.eta1[i] = e
         w.etad1[i] = v
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
-    nc = m2 // 2
-    kin, rot, pot = granule_energies(w.ytr, model, w.un[nn - 1].reshape(nc, 2))
+    kin, rot, pot = granule_energies(w.ytr, model, w.un[nn - 1].reshape(m2 // 2, 2))
     n = kin.shape[0]
     return es + kin.sum() + rot.sum() + pot.sum() + w.ytr[6 * n] + w.ytr[6 * n + 1] - w.ytr[6 * n + 2]
 
 
 @njit(cache=True)
-def step_error(y, w, cfg, granules, h, defect):
+def step_error(w, cfg, granules, h, defect):
     """The scaled local error of the coupled step (<= 1: accept): the largest embedded RK4 error
     of a granule's velocity or spin velocity R omega against atol + rtol v_ref, and the step's
     energy-ledger defect (13) against its share h / duration of ledger_tol e_ref."""
@@ -814,38 +768,26 @@ def step_error(y, w, cfg, granules, h, defect):
 
 
 @njit(cache=True)
-def accept(st, solid, cache, slot, h, w, rate, ledger):
+def accept(st, cache, slot, h, w, rate, ledger):
     """The accepted step: modes, interface data and the granules to t + h; the step kept for dense
-    output and the next predictor. The force's end slope becomes the next step's start slope (C1
-    model), but for a contact open at the end: its force rises from zero again with zero slope."""
+    output and the next predictor."""
     nc = st.F.shape[0]
     m2 = 2 * nc
-    nr = st.eta.shape[0]
-    nb, k0 = cache.nodes.shape[0], cache.known
-    nn = nb - k0
+    nb = cache.nodes.shape[0]
+    nn = nb - 1
     st.y0[:] = st.y
-    st.dy0[:] = st.dy
     st.eta0[:] = st.eta
     st.etad0[:] = st.etad
-    gather_data(st, w.X, k0, w.D)
-    for b in range(nb):
+    st.Fs[0, :, :] = st.F
+    for b in range(1, nb):
         for r in range(m2):
-            st.Fs[b, r // 2, r % 2] = w.D[b, r]
+            st.Fs[b, r // 2, r % 2] = w.X[(b - 1) * m2 + r]
     st.qs[:, :] = w.qdat  # from `trial_ledger`
-    T = cache.T[slot]
-    st.Ts[:, :] = T
-    st.eta[:] = w.eta1  # from `trial_ledger`
+    st.Ts[:, :] = cache.T[slot]
+    st.eta[:] = w.eta1
     st.etad[:] = w.etad1
-    end = node_iface(w, nn - 1)
-    for r in range(m2):
-        slope = 0.0
-        for b in range(nb):
-            slope += (T[b, 1] + T[b, 2] * h + 0.5 * T[b, 3] * h * h) * st.Fs[b, r // 2, r % 2]
-        st.F[r // 2, r % 2] = st.Fs[nb - 1, r // 2, r % 2]
-        st.Fd[r // 2, r % 2] = slope if end.normal[r // 2] > 0.0 else 0.0
+    st.F[:, :] = st.Fs[nb - 1]
     st.q[:] = st.qs[nb - 1]
-    if k0 > 1 and nr > 0:
-        st.qd[:] = np.dot(st.Fd.ravel(), solid.P)
     st.u[:] = w.un[nn - 1]
     st.w[:] = w.wn[nn - 1]
     mo, sm = w.motion, st.step_motion
@@ -857,6 +799,7 @@ def accept(st, solid, cache, slot, h, w, rate, ledger):
     sm.d5[:, :] = mo.d5
     st.y[:] = w.ytr
     st.dy[:] = w.k5
+    end = node_iface(w, nn - 1)
     st.normal[:] = end.normal
     st.vrel[:] = end.vrel
     st.clock[1] = st.clock[0]
@@ -870,12 +813,12 @@ def friction_slopes(st, law, cache, slot, frame, lam):
     """The slope of each contact's local friction map over the step just taken, the analogue of
     (A9) for this integrator: mu k_s |N| t' Cw t / cosh^2(k_s v_t), Cw the end velocity's
     response to the end force."""
-    nb, k0 = cache.nodes.shape[0], cache.known
+    nb = cache.nodes.shape[0]
     for c in range(lam.shape[0]):
         if not frame.has_tangent[c]:
             lam[c] = 0.0
             continue
-        ctt = core.tangential_compliance(cache.Cw[slot, nb - k0 - 1, nb - 1], c, frame.tangent[c, 0], frame.tangent[c, 1])
+        ctt = core.tangential_compliance(cache.Cw[slot, nb - 2, nb - 1], c, frame.tangent[c, 0], frame.tangent[c, 1])
         lam[c] = friction_map_slope(law.mu, law.k_s, st.normal[c], st.vrel[c], ctt)
 
 
@@ -933,7 +876,7 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log, k
                 continue
             return status, k
         ledger = trial_ledger(st, solid, cache, slot, model, w)
-        err = step_error(w.ytr, w, cfg, model.granules, h, ledger - st.clock[4]) if cfg.adaptive else 0.0
+        err = step_error(w, cfg, model.granules, h, ledger - st.clock[4]) if cfg.adaptive else 0.0
         if err > 1.0 and level < cfg.levels:
             st.clock[6] = max(level + 1.0, next_level(st.clock[6], err, 1.0, cfg))
             st.meta[0] = grid_level(st.clock[6])
@@ -941,7 +884,7 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log, k
             continue
         if abs(ledger - st.clock[5]) > cfg.ledger_limit:
             return core.BALANCE_LOST, k  # even the smallest step lost the energy balance (13)
-        accept(st, solid, cache, slot, h, w, w.rate[0], ledger)
+        accept(st, cache, slot, h, w, w.rate[0], ledger)
         friction_slopes(st, model.law, cache, slot, solid.frame, lam)
         log.t[k] = st.clock[0]
         log.h[k] = h
@@ -961,8 +904,7 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
     """Accepted steps through the output times `targets`, the state at each by dense output into
     `out` (y, eta, eta', F per output), from output done[0] on; done[0] counts the outputs filled.
     Returns (status, steps logged) as `advance_exact`, which it calls: DONE once all are filled."""
-    nc = st.F.shape[0]
-    w = work_for(st.y, nc, st.eta.shape[0], cache.nodes.shape[0], cache.nodes.shape[0] - cache.known)
+    w = work_for(st.y, st.F.shape[0], st.eta.shape[0], cache.nodes.shape[0])
     k = 0
     oy, oeta, oetad, oF = out
     while done[0] < targets.shape[0]:
@@ -977,23 +919,30 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
     return core.DONE, k
 
 
+class OutputQuantities(NamedTuple):
+    """Filled by `output_quantities` for a batch of K outputs."""
+
+    media: np.ndarray  # (K, n_media)
+    solid: np.ndarray  # (K, 2): kinetic, potential
+    su: np.ndarray  # (K, nc, 2)
+    overlap: np.ndarray  # (K,)
+    where: np.ndarray  # (K, 2) int: kind, index
+
+
 @njit(cache=True)
-def output_quantities(oy, oeta, oetad, oF, model, solid, medium, n_media, q):
+def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
     """Per output o of a batch: each medium's energy (11) in q.media[o], the solid's kinetic and
-    potential energy (the dropped modes' static 1/2 F'RF included), the contacts' displacement,
-    the deepest overlap (eq. 2) over the smaller radius with its kind (0 pair, 1 wall, 2 solid)
-    and index."""
-    nc = oF.shape[1]
+    potential energy, the contacts' displacement, the deepest overlap (eq. 2) over the smaller
+    radius with its kind (0 pair, 1 wall, 2 solid) and index."""
+    nc = solid.P.shape[0] // 2
     radius = model.granules.radius
     pairs, walls, points = model.pairs, model.walls, model.points
     for o in range(oy.shape[0]):
-        f = oF[o].ravel()
         su = np.dot(solid.P, oeta[o]) if solid.P.shape[1] else np.zeros(2 * nc)
-        ek = 0.5 * np.dot(oetad[o], oetad[o])
         ep = 0.0
         for i in range(oeta.shape[1]):
             ep += 0.5 * solid.omega[i] ** 2 * oeta[o, i] ** 2
-        q.solid[o, 0] = ek
+        q.solid[o, 0] = 0.5 * np.dot(oetad[o], oetad[o])
         q.solid[o, 1] = ep
         sup = su.reshape(nc, 2)
         q.su[o, :, :] = sup
@@ -1019,16 +968,6 @@ def output_quantities(oy, oeta, oetad, oF, model, solid, medium, n_media, q):
         q.overlap[o] = best
         q.where[o, 0] = kind
         q.where[o, 1] = idx
-
-
-class OutputQuantities(NamedTuple):
-    """Filled by `output_quantities` for a batch of K outputs."""
-
-    media: np.ndarray  # (K, n_media)
-    solid: np.ndarray  # (K, 2): kinetic, potential
-    su: np.ndarray  # (K, nc, 2)
-    overlap: np.ndarray  # (K,)
-    where: np.ndarray  # (K, 2) int: kind, index
 
 
 @njit(cache=True)

@@ -40,7 +40,7 @@ class SolverSettings:
     reltol: float = 1e-6
     max_iterations: int = 50
     integrator: str = "newmark"  # the fast method's solid integrator: newmark | exact (modal, polynomial force)
-    force_model: str = "quadratic"  # the exact integrator's force over a step: quadratic | cubic | linear
+    force_model: str = "quadratic"  # the exact integrator's force over a step: quadratic | linear
     adaptive: bool = True  # the exact integrator's error-controlled steps (False: every step is dt)
     rtol: float = 1e-5  # local error tolerance of the adaptive step, relative to v_ref
     atol: float = 1e-9  # [m/s]
@@ -331,7 +331,7 @@ class ExactSolver:
         q = exact.OutputQuantities(np.zeros((K, len(self.system.media))), np.zeros((K, 2)), np.zeros((K, nc, 2)), np.zeros(K),
                                    np.zeros((K, 2), np.int64))
         if n:
-            exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], out[3][:n], self.stepper.model, self.solid,
+            exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], self.stepper.model, self.solid,
                                     self.system.medium_index, len(self.system.media), q)
         self._batch = {"k0": k0, "done": n, "out": out, "q": q, "error": error, "model": self.stepper.model}
 

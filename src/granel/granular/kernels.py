@@ -216,13 +216,15 @@ def rhs(t, y, dy, model, motion, tau):
 
 
 @njit(cache=True)
-def rk4_step(y, t, h, model, motion, tau0, work):
+def rk4_step(y, t, h, model, motion, tau0, work, k1_known=False):
     """One classical RK4 step of size h from time t, in place; the contact points sit at tau0 + s
-    into the coupled step (A3). `work` is (5, len(y)) scratch. Returns False if y is not finite."""
+    into the coupled step (A3). `work` is (5, len(y)) scratch; with `k1_known`, work[0] already
+    holds the derivative at the start (first same as last). Returns False if y is not finite."""
     m = y.shape[0]
     k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
     h2 = 0.5 * h
-    rhs(t, y, k1, model, motion, tau0)
+    if not k1_known:
+        rhs(t, y, k1, model, motion, tau0)
     for k in range(m):
         tmp[k] = y[k] + h2 * k1[k]
     rhs(t + h2, tmp, k2, model, motion, tau0 + h2)

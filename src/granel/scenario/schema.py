@@ -81,7 +81,7 @@ class SimulationSpec(_Strict):
     checkpoint_every: float = 0.0
     solid_output_every: float = Field(0.0, description="interval of stored solid states (0: output_every)")
     integrator: Literal["newmark", "exact"] = Field("newmark", description="the fast method's solid integrator")
-    force_model: Literal["quadratic", "cubic", "linear"] = Field("quadratic", description="exact integrator: the interface force over a step, through its values at 0, h/2, h (quadratic), with its start slope too (cubic) or at 0, h (linear)")
+    force_model: Literal["quadratic", "linear"] = Field("quadratic", description="exact integrator: the interface force over a step, the polynomial through its values at 0, h/2, h (quadratic) or at 0, h (linear)")
     adaptive: bool = Field(True, description="error-controlled steps (exact integrator); false: every step is dt")
     rtol: float = Field(1e-5, gt=0, lt=1, description="local error tolerance, relative to the largest speed the loads impart")
     atol: float = Field(1e-9, ge=0, description="absolute local error tolerance [m/s]")
