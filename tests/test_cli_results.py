@@ -22,9 +22,9 @@ def test_run_writes_netcdf_and_summary(tmp_path):
                               "--duration", "0.05ms", "-o", str(out), "--json-summary"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout[res.stdout.index("{"): res.stdout.rindex("}") + 1])
-    assert summary["steps"] == 1250
     assert summary["max_balance_error_rel"] < 1e-6
     ds = read_netcdf(out)
+    assert summary["steps"] == ds.attrs["solver_steps"] == ds.sizes["step"] > 0
     assert ds.sizes["granule"] == 28 and ds.sizes["time"] == 51
     assert list(ds["granule"].values[:3]) == ["LSGM:1", "LSGM:2", "LSGM:3"]
     for v in ("x", "y", "theta", "v_x", "v_y", "omega", "energy_lsgm", "energy_ssgm", "energy_solid",

@@ -172,7 +172,8 @@ def test_rigid_solid_is_the_no_mode_case_of_the_core():
     the plain granular stepper, to round-off."""
     from granel.granular.system import Stepper
 
-    sc = S.load("paper", ['solid.kind="rigid"', 'excitations.0.granule="SSGM:C"', 'simulation.duration="0.05ms"'])
+    sc = S.load("paper", ['solid.kind="rigid"', 'excitations.0.granule="SSGM:C"', 'simulation.duration="0.05ms"',
+                          'simulation.integrator="newmark"'])
     ds = run_scenario(sc)
     system, state, _ = S.build_granular(sc)
     Stepper(system, substep=True).advance(state, 4e-8, 1250)
@@ -183,13 +184,16 @@ def test_rigid_solid_is_the_no_mode_case_of_the_core():
 def test_paper_and_fast_methods_agree_at_stiff_friction():
     """k_s = 1e4 on the plate (weak shock on the SSGM, through its first contacts with the plate):
     the paper's fixed point needs (B1) steps of 8e-11 s, the fast method keeps 40 ns with Newton and
-    the exact local friction root; they agree to 1e-5 of the input (measured 7e-7 over 0.1 ms)."""
+    the exact local friction root; they agree to 1e-5 of the input (measured 7e-7 over 0.1 ms), and so
+    does the exact integrator with its own steps."""
     base = ['excitations.0.granule="SSGM:C"', 'excitations.0.shock="weak"', "contact.k_s=1e4", 'simulation.duration="0.065ms"',
             "simulation.max_halvings=20"]
     a = run_scenario(S.load("paper", base + ['simulation.solver="paper"']))
-    b = run_scenario(S.load("paper", base + ['simulation.solver="fast"']))
+    b = run_scenario(S.load("paper", base + ['simulation.solver="fast"', 'simulation.integrator="newmark"']))
+    c = run_scenario(S.load("paper", base + ['simulation.solver="fast"']))  # the exact integrator
     assert a.attrs["solver_min_step"] <= 4e-8 / 2**8 and b.attrs["solver_min_step"] == 4e-8
     w = a["input_work"].values.max()
     assert b["energy_solid"].values.max() > 1e-3 * w  # the plate was reached
     for k in ("energy_lsgm", "energy_ssgm", "energy_solid", "dissipated_friction"):
         assert np.abs(a[k].values - b[k].values).max() < 1e-5 * w, k
+        assert np.abs(a[k].values - c[k].values).max() < 1e-5 * w, k

@@ -89,14 +89,17 @@ def test_symmetric_shock_leaves_antisymmetric_beam_modes_unexcited(twelve):
         sym = np.abs(eta[:, 0::2]).max()
         anti = np.abs(eta[:, 1::2]).max()
         assert sym > 0
-        # round-off only: the mirrored start is exact to 1 ulp and friction amplifies it (measured 1.2e-9)
-        assert anti < 1e-8 * sym
+        # round-off only: the mirrored start is exact to 1 ulp and friction amplifies it (measured 1.2e-9
+        # with Newmark; 1.3e-8 with the exact integrator, whose residual modes mix nearly degenerate
+        # symmetric and antisymmetric static shapes before their projection on the eigenmodes)
+        assert anti < 1e-7 * sym
 
 
 def test_paper_and_fast_solvers_agree_beam():
     """The beam at constant dt0: the two solvers solve the same discrete equations."""
     a = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="paper"', 'simulation.duration="0.3ms"'))
-    b = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="fast"', 'simulation.duration="0.3ms"'))
+    b = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="fast"', 'simulation.integrator="newmark"',
+                           'simulation.duration="0.3ms"'))
     assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-6
     assert a.attrs["solver_min_step"] == 4e-8
     w = a["input_work"].values.max()
@@ -149,7 +152,7 @@ def test_coupled_resume(tmp_path, solver):
 
 def test_sparse_newton_path_matches_the_modal_path():
     """Solids too large for all modes use sparse Newmark with the same Newton coupling."""
-    sc = paper("plate", "SSGM:C", "strong", 'simulation.duration="0.04ms"')
+    sc = paper("plate", "SSGM:C", "strong", 'simulation.duration="0.04ms"', 'simulation.integrator="newmark"')
     a = run_problem(S.build_problem(sc), sparse=True)
     b = run_scenario(sc)
     assert a.attrs["solver_name"] == "fast-sparse" and b.attrs["solver_name"] == "fast"
@@ -163,7 +166,7 @@ def test_paper_method_on_the_strong_ssgm_plate_case():
     (B1) holds at every step, and it agrees with the fast method (a different iteration and step on
     the same discretisation) to 1e-3 of the input (measured 1.8e-4)."""
     a = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.solver="paper"'))
-    b = run_scenario(paper("plate", "SSGM:C", "strong"))
+    b = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.integrator="newmark"'))
     w = a["input_work"].values.max()
     assert np.abs(a["balance_error"].values).max() < 1e-6 * w
     assert a["step_lambda"].values.max() <= 0.5 + 1e-6 and a.attrs["solver_min_step"] < 4e-8 / 2**7

@@ -39,13 +39,13 @@ class SolverSettings:
     abstol: float = 1e-6  # (A4) [N]
     reltol: float = 1e-6
     max_iterations: int = 50
-    integrator: str = "newmark"  # the fast method's solid integrator: newmark | exact (modal, polynomial force)
+    integrator: str = "exact"  # the fast method's solid integrator: exact (modal, polynomial force) | newmark
     force_model: str = "quadratic"  # the exact integrator's force over a step: quadratic | linear
     adaptive: bool = True  # the exact integrator's error-controlled steps (False: every step is dt)
     rtol: float = 1e-5  # local error tolerance of the adaptive step, relative to v_ref
     atol: float = 1e-9  # [m/s]
     max_step: float = 1e-6  # [s]
-    mode_cutoff: float = 2e6  # [Hz]: modes above answer statically (residual flexibility)
+    mode_cutoff: float | str = "auto"  # [Hz]: eigenmodes above are replaced by residual modes ("auto": run.auto_mode_cutoff)
     ledger_tol: float = 1e-5  # the step's energy-ledger defects (13) add up to at most this share of the input
 
     def config(self, max_disp: float) -> core.CoupledConfig:
@@ -217,7 +217,7 @@ class ExactSolver:
         nc = len(system.solid_contacts)
         frame = contact_frame(system, model)
         if model.ndof:
-            keep = modes.omega <= 2 * np.pi * settings.mode_cutoff
+            keep = modes.omega <= 2 * np.pi * float(settings.mode_cutoff)
             B = model.contact_map()
             P = at_dofs(B, modes.shapes, keep)
             omega = modes.omega[keep]

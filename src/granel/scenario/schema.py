@@ -80,13 +80,15 @@ class SimulationSpec(_Strict):
     max_halvings: int = Field(12, ge=0)
     checkpoint_every: float = 0.0
     solid_output_every: float = Field(0.0, description="interval of stored solid states (0: output_every)")
-    integrator: Literal["newmark", "exact"] = Field("newmark", description="the fast method's solid integrator")
+    integrator: Literal["exact", "newmark"] = Field("exact", description="the fast method's solid integrator: exact (modal, error-controlled steps) or newmark (modal Newmark at dt, the paper's solid scheme)")
     force_model: Literal["quadratic", "linear"] = Field("quadratic", description="exact integrator: the interface force over a step, the polynomial through its values at 0, h/2, h (quadratic) or at 0, h (linear)")
     adaptive: bool = Field(True, description="error-controlled steps (exact integrator); false: every step is dt")
     rtol: float = Field(1e-5, gt=0, lt=1, description="local error tolerance, relative to the largest speed the loads impart")
     atol: float = Field(1e-9, ge=0, description="absolute local error tolerance [m/s]")
     max_step: float = Field(1e-6, description="largest adaptive step [s]")
-    mode_cutoff: float = Field(2e6, gt=0, description="modes above this frequency [Hz] answer statically (exact integrator)")
+    mode_cutoff: Union[Literal["auto"], Annotated[float, Field(gt=0)]] = Field(
+        "auto", description="exact integrator: eigenmodes above this frequency [Hz] are replaced by residual modes; auto: "
+        "from rtol and the stiffest solid contact (run.auto_mode_cutoff)")
     ledger_tol: float = Field(1e-5, gt=0, lt=1, description="exact integrator: the steps' energy-ledger defects (13) add up to at most this share of the input")
     balance_limit: float = Field(1e-2, gt=0, description="stop (exit 3) when the energy balance (13) is off by more than this share of the energy put in")
     overlap_limit: float = Field(0.1, gt=0, description="stop (exit 3) when a contact overlaps by more than this share of the smaller radius")
