@@ -428,26 +428,32 @@ def bench(
     json_out: bool = typer.Option(False, "--json", help="print one JSON object"),
     cases: Optional[str] = typer.Option(None, help="comma list of case tags, e.g. plate-SSGMC-strong"),
     duration: Optional[str] = typer.Option(None, help="simulated time per case (default 0.8 ms, 0.1 ms with --quick)"),
+    reference: bool = typer.Option(False, "--reference", help="also each method's errors against Newmark at 5 ns "
+                                   "on the strong SSGM-side plate case (when it is among the cases)"),
+    fresh: bool = typer.Option(True, "--fresh/--no-fresh", help="time `granel run` in fresh processes"),
 ):
-    """The paper's algorithm, the fast method and the exact integrator side by side in one process:
-    wall times, ratios, deviations."""
+    """The paper's algorithm and the fast method (its exact integrator, and Newmark at dtau0) side by
+    side in one process: wall times, ratios, steps, deviations; fresh-process and `granel paper`
+    times."""
     from .benchmark import run_bench
 
-    res = run_bench(quick=quick, only=cases.split(",") if cases else None, duration=duration,
-                    log=lambda s: console.print(s))
+    res = run_bench(quick=quick, only=cases.split(",") if cases else None, duration=duration, reference=reference,
+                    fresh=fresh, log=lambda s: console.print(s))
     if json_out:
         print(json.dumps(res, indent=2))
         return
-    t = Table("case", "paper [s]", "fast [s]", "ratio", "exact [s]", "ratio", "energy dev [% input]", "velocity rel L2",
-              title="granel bench (deviations from the paper's algorithm: fast / exact)")
+    t = Table("case", "paper [s]", "exact [s]", "ratio", "steps", "newmark [s]", "ratio", "energy dev [% input]",
+              "velocity rel L2", title="granel bench (deviations from the paper's algorithm: exact / newmark)")
     for c in res["cases"]:
-        t.add_row(f"{c['solid']}-{c['excite']}-{c['shock']}", f"{c['paper_s']:.2f}", f"{c['fast_s']:.3f}", f"{c['ratio']:.1f}",
-                  f"{c['exact_s']:.3f}", f"{c['exact_ratio']:.1f}",
-                  f"{c['energy_dev_pct']:.4f} / {c['exact_energy_dev_pct']:.4f}",
-                  f"{c['velocity_rel_l2']:.2e} / {c['exact_velocity_rel_l2']:.2e}")
+        t.add_row(f"{c['solid']}-{c['excite']}-{c['shock']}", f"{c['paper_s']:.2f}", f"{c['exact_s']:.3f}",
+                  f"{c['exact_ratio']:.1f}", str(c["exact_steps"]), f"{c['newmark_s']:.3f}", f"{c['newmark_ratio']:.1f}",
+                  f"{c['exact_energy_dev_pct']:.4f} / {c['newmark_energy_dev_pct']:.4f}",
+                  f"{c['exact_velocity_rel_l2']:.2e} / {c['newmark_velocity_rel_l2']:.2e}")
     Console().print(t)
-    if res.get("paper_total_s") is not None:
-        console.print(f"granel paper (no animations): {res['paper_total_s']:.1f} s")
+    console.print(f"totals: paper {res['paper_total_s']:.1f} s, exact {res['exact_total_s']:.2f} s, "
+                  f"newmark {res['newmark_total_s']:.2f} s")
+    if res.get("paper_study_s") is not None:
+        console.print(f"granel paper (no animations): {res['paper_study_s']:.1f} s")
 
 
 @app.command()
