@@ -153,7 +153,7 @@ def run(
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
     from .checkpoint import CheckpointError
-    from .results import write_netcdf
+    from .results import write_spec_netcdf
     from .run import run_scenario, summarize
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
@@ -179,7 +179,7 @@ def run(
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
         try:
-            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit)
+            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit, dataset=False)
         except S.ScenarioError as e:
             _fail(str(e))
         except CheckpointError as e:
@@ -187,7 +187,7 @@ def run(
         except RuntimeError as e:
             _fail(f"run stopped: {e}", code=3)
     try:
-        write_netcdf(ds, output)
+        write_spec_netcdf(ds, output)
     except OSError as e:
         _fail(f"-o {output}: could not write the result: {e}", code=4)
     if ckpt.exists() and (sc.simulation.checkpoint_every > 0 or resume is not None):

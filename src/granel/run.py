@@ -12,13 +12,12 @@ import tomllib
 from dataclasses import replace
 
 import numpy as np
-import xarray as xr
 
 from . import scenario as S
 from .checkpoint import fingerprint
 from .coupling.driver import drive
 from .problem import Problem
-from .results import base_attrs, trajectory_dataset
+from .results import base_attrs, trajectory_spec
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
@@ -101,9 +100,10 @@ def load_kinks(system) -> list[float]:
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,
-                max_wall: float | None = None) -> xr.Dataset:
-    """Solve a built problem and return its result Dataset (at most `max_wall` seconds of
-    solving: `coupling.driver.WallTimeExceeded` beyond)."""
+                max_wall: float | None = None, dataset: bool = True):
+    """Solve a built problem and return its result Dataset (a `results.ResultSpec` with
+    dataset=False: no xarray needed), after at most `max_wall` seconds of solving
+    (`coupling.driver.WallTimeExceeded` beyond)."""
     solver = make_solver(problem, sparse)
     fp = fingerprint(problem.source + problem.settings.method)
     traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
@@ -115,12 +115,14 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     attrs = base_attrs(problem.source, info)
     attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
     omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
-    return trajectory_dataset(traj, problem.system, solid, attrs, omega)
+    spec = trajectory_spec(traj, problem.system, solid, attrs, omega)
+    return spec.to_dataset() if dataset else spec
 
 
-def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, max_wall: float | None = None) -> xr.Dataset:
-    """Run a validated scenario and return its result Dataset."""
-    return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall)
+def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, max_wall: float | None = None,
+                 dataset: bool = True):
+    """Run a validated scenario and return its result Dataset (or `results.ResultSpec`)."""
+    return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
 
 
 @functools.lru_cache(maxsize=8)
@@ -141,8 +143,8 @@ def built_from_result(ds):
     return _built_from_text(ds.attrs["scenario"])
 
 
-def summarize(ds: xr.Dataset) -> dict:
-    """Numbers for the end-of-run table and --json-summary."""
+def summarize(ds) -> dict:
+    """Numbers for the end-of-run table and --json-summary (of a Dataset or a `ResultSpec`)."""
     w = ds["input_work"].values
     wmax = float(np.max(np.abs(w))) if w.size else 0.0
     err = np.abs(ds["balance_error"].values)

@@ -169,8 +169,105 @@ class PlateMesh:
     rigid_layers: bool = True
 
 
+PLATE_CACHE_VERSION = 1  # raise when the assembly below changes what it produces
+
+
 def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
                 clamped=(True, True)) -> SolidModel:
+    """The reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one per
+    layer). The assembled matrices are cached on disk by the arguments: a run then needs no
+    scikit-fem (its import alone takes about 0.5 s); the element-level quantities of figures and
+    movies (`element_energies`, `basis`) assemble the plate again on first use."""
+    args = (x0, y0, width, length, thickness, E, nu, rho, tuple(layers), mesh, tuple(clamped))
+    path = _plate_cache_path(args)
+    model = _load_plate(path, args)
+    if model is None:
+        model = assemble_plate(*args)
+        _save_plate(path, model)
+    return model
+
+
+def _plate_cache_path(args):
+    import hashlib
+
+    from .modal import cache_dir
+
+    key = hashlib.sha256(repr((PLATE_CACHE_VERSION, args)).encode()).hexdigest()[:24]
+    return cache_dir() / f"plate-{key}.npz"
+
+
+def _save_plate(path, model: SolidModel) -> None:
+    """The assembled arrays of a plate model (atomically; a cache that cannot be written is skipped)."""
+    import json
+    import os
+
+    arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
+              "volume": model.element_volume, "node_dofs": model.node_dofs,
+              "contacts": np.array(json.dumps([c.__dict__ for c in model.contacts]))}
+    for name, A in (("M", model.M), ("K", model.K), ("T", model.T)):
+        A = A.tocsr()
+        arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr,
+                       f"{name}_shape": np.array(A.shape)})
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _load_plate(path, args) -> SolidModel | None:
+    """The cached plate of these arguments, or None (missing or unreadable cache)."""
+    import json
+
+    if not path.exists():
+        return None
+    try:
+        with np.load(path) as z:
+            mats = {n: sp.csr_matrix((z[f"{n}_data"], z[f"{n}_indices"], z[f"{n}_indptr"]), shape=tuple(z[f"{n}_shape"]))
+                    for n in ("M", "K", "T")}
+            info = json.loads(str(z["info"]))
+            contacts = [ContactPoint(**{**c, "position": tuple(c["position"]), "normal": tuple(c["normal"])})
+                        for c in json.loads(str(z["contacts"]))]
+            nodes, elements, volume, node_dofs = z["nodes"], z["elements"], z["volume"], z["node_dofs"]
+    except (OSError, ValueError, KeyError):
+        return None
+    model = CachedPlate("plate", mats["M"], mats["K"], contacts, info, mats["T"], nodes, elements, None, volume, None)
+    model.node_dofs = node_dofs
+    model.full_displacement = model.full
+    model.element_energies = model.energies
+    model.args = args
+    return model
+
+
+class CachedPlate(SolidModel):
+    """A plate model from the cache: matrices, contacts and geometry; scikit-fem's basis (for the
+    element energies and point probes) is assembled again on first use."""
+
+    def full(self, q):
+        x = self.T @ q
+        return np.column_stack([x[self.node_dofs[0]], x[self.node_dofs[1]]])
+
+    @property
+    def basis(self):
+        return self._assembled().basis
+
+    def energies(self, q, v):
+        return self._assembled().element_energies(q, v)
+
+    def _assembled(self) -> SolidModel:
+        if getattr(self, "_full_model", None) is None:
+            self._full_model = assemble_plate(*self.args)
+        return self._full_model
+
+
+def assemble_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
+                   clamped=(True, True)) -> SolidModel:
     """Assemble the reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one
     per layer)."""
     rigid_layers, nx = mesh.rigid_layers, mesh.nx
@@ -269,4 +366,5 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
             "ny": int(mesh.t.shape[1] // nx), "full_dofs": int(N), "rigid_layers": bool(rigid_layers)}
     model = SolidModel("plate", Mr, Kr, contacts, info, T, nodes, elem, energies, vol, full)
     model.basis = basis
+    model.node_dofs = np.vstack([node_dofx, node_dofy])
     return model
