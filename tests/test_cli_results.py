@@ -113,3 +113,37 @@ def test_animate_command(tmp_path):
     assert iio.imread(tmp_path / "m.mp4").shape[0] == 3
     res = runner.invoke(app, ["animate", str(out), "--field", "sound"])
     assert res.exit_code == 2
+
+
+def test_the_result_file_written_without_xarray_is_xarrays():
+    """`granel run` writes its NetCDF from the result's variables with h5netcdf alone; read back,
+    the file is identical (values, dtypes, coordinates, attributes) to the one xarray writes from
+    the Dataset of the same variables."""
+    import tempfile
+
+    from granel.results import write_netcdf, write_spec_netcdf
+
+    for solid in ("plate", "rigid"):
+        spec = run_scenario(S.load("paper", [f'solid.kind="{solid}"', 'simulation.duration="3us"']), dataset=False)
+        with tempfile.TemporaryDirectory() as d:
+            a, b = write_spec_netcdf(spec, f"{d}/a.nc"), write_netcdf(spec.to_dataset(), f"{d}/b.nc")
+            da, db = read_netcdf(a), read_netcdf(b)
+        xr.testing.assert_identical(da, db)
+        assert all(da[v].dtype == db[v].dtype for v in da.variables)
+
+
+def test_a_fresh_run_imports_only_what_it_needs(tmp_path):
+    """A fresh `granel run` of a plate case (its assembly cached by an earlier run) imports
+    neither xarray and pandas (the result is written with h5netcdf), nor scikit-fem, matplotlib or
+    dask."""
+    import subprocess
+    import sys
+
+    code = ("import runpy, sys; sys.argv = ['granel', 'run', 'paper', '--duration', '2us', '-o', sys.argv[1]]\n"
+            "try:\n    runpy.run_module('granel', run_name='__main__')\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
+            "print(sorted(m for m in ('xarray', 'pandas', 'skfem', 'matplotlib', 'dask', 'distributed') "
+            "if sys.modules.get(m) is not None))")
+    for k in range(2):  # the first may assemble the plate (and cache it)
+        out = subprocess.run([sys.executable, "-c", code, str(tmp_path / f"r{k}.nc")], capture_output=True, text=True,
+                             check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
