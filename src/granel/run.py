@@ -21,28 +21,30 @@ from .results import base_attrs, trajectory_spec
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
-    """The solver for a problem: the compiled modal core (all modes; none for a rigid solid), or
-    sparse Newmark around the same core for solids too large for all modes (`sparse` forces
-    either)."""
+    """The solver for a problem. The fast method's exact integrator: the modes below its cut-off
+    (for solids beyond `solid.modal.DENSE_LIMIT` DOFs, only those are computed) and residual
+    modes. Newmark (the paper's method, or the fast method's `integrator = "newmark"`): the
+    compiled modal core with all modes (none for a rigid solid), or sparse Newmark around the
+    same core for solids too large for all modes (`sparse` forces either)."""
     from .coupling.solver import ModalSolver
-    from .solid.modal import DENSE_LIMIT, all_modes
+    from .solid.modal import DENSE_LIMIT, all_modes, modes_below
 
-    solid, per = problem.solid, problem.schedule.per
-    if sparse if sparse is not None else solid.ndof > DENSE_LIMIT:
-        from .coupling.sparse import SparseSolver
-
-        return SparseSolver(problem.system, problem.state, solid, problem.settings, per)
-    modes = all_modes(solid) if solid.ndof else None
-    settings = problem.settings
-    if settings.method == "fast" and settings.integrator == "exact":
+    solid, per, settings = problem.solid, problem.schedule.per, problem.settings
+    large = sparse if sparse is not None else solid.ndof > DENSE_LIMIT
+    if settings.method == "fast" and settings.integrator == "exact" and not sparse:
         from .coupling.solver import ExactSolver
 
         v_ref, e_ref = reference_scales(problem)
         if settings.mode_cutoff == "auto":
             settings = replace(settings, mode_cutoff=auto_mode_cutoff(problem.system, v_ref, settings.rtol))
+        modes = None if not solid.ndof else (modes_below(solid, float(settings.mode_cutoff)) if large else all_modes(solid))
         return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
                            load_kinks(problem.system))
-    return ModalSolver(problem.system, problem.state, solid, settings, per, modes)
+    if large:
+        from .coupling.sparse import SparseSolver
+
+        return SparseSolver(problem.system, problem.state, solid, settings, per)
+    return ModalSolver(problem.system, problem.state, solid, settings, per, all_modes(solid) if solid.ndof else None)
 
 
 def reference_scales(problem: Problem) -> tuple[float, float]:
@@ -79,9 +81,9 @@ def contact_frequency(system, v_ref: float) -> float:
 def auto_mode_cutoff(system, v_ref: float, rtol: float) -> float:
     """The exact integrator's mode cut-off from its tolerance: the frequency where the dropped
     modes' quasi-static error, about TRUNCATION_ERROR (f_H / f_cut)^2 with f_H the stiffest solid
-    contact's Hertz frequency, is 10 rtol (0.91 MHz for the strong SSGM-side shock at rtol 1e-5)."""
+    contact's Hertz frequency, is 3 rtol (1.66 MHz for the strong SSGM-side shock at rtol 1e-5)."""
     f_h = contact_frequency(system, v_ref)
-    return f_h * float(np.sqrt(TRUNCATION_ERROR / (10.0 * rtol))) if f_h > 0 else 2e6
+    return f_h * float(np.sqrt(TRUNCATION_ERROR / (3.0 * rtol))) if f_h > 0 else 2e6
 
 
 def load_kinks(system) -> list[float]:

@@ -222,16 +222,19 @@ class ExactSolver:
             P = at_dofs(B, modes.shapes, keep)
             omega = modes.omega[keep]
             # the dropped modes: their static compliance at the contacts, as residual modes
-            om_r, P_r, self.residual_Z = residual_modes(model, B, modes.shapes, keep, omega,
-                                                        residual_compliance(model, B, P, omega))
+            om_r, P_r, self.residual_Z, Psi = residual_modes(model, B, modes.shapes, keep, omega,
+                                                             partial=modes.count < model.ndof)
             self.kept, self.residual = int(len(omega)), int(len(om_r))
             omega = np.concatenate([omega, om_r])
             P = np.ascontiguousarray(np.hstack([P, P_r]))
             self.P_drop = at_dofs(B, modes.shapes, ~keep)
             self.omega_drop = modes.omega[~keep]
+            # only the modes below the cut-off are known (a large solid): the solid's state is
+            # stored in its reduced nodal coordinates, q = Phi eta + Psi Z q_r
+            self.nodal = None if modes.count == model.ndof else (np.asarray(modes.shapes), Psi @ self.residual_Z)
         else:
             P, omega = np.zeros((2 * nc, 0)), np.zeros(0)
-            self.kept, self.residual, self.residual_Z = 0, 0, np.zeros((2 * nc, 0))
+            self.kept, self.residual, self.residual_Z, self.nodal = 0, 0, np.zeros((2 * nc, 0)), None
             self.P_drop, self.omega_drop = np.zeros((2 * nc, 0)), np.zeros(0)
         self.modes = modes
         self.solid = exact.ExactSolid(omega, P, frame)
@@ -386,6 +389,10 @@ class ExactSolver:
         so that the modal energies add up to the solid's energy."""
         _, eta, etad, F = self._dense()
         nk = self.kept
+        if self.nodal is not None:
+            Phi, PsiZ = self.nodal
+            return {"q": (Phi @ eta[:nk] + PsiZ @ eta[nk:]).astype(np.float32),
+                    "v": (Phi @ etad[:nk] + PsiZ @ etad[nk:]).astype(np.float32)}
         Z = self.residual_Z
         d = (Z @ eta[nk:]) @ self.P_drop / self.omega_drop**2
         dd = (Z @ etad[nk:]) @ self.P_drop / self.omega_drop**2
@@ -397,34 +404,31 @@ class ExactSolver:
         return {"name": "fast", "integrator": "exact", "adaptive": int(s.adaptive), "rtol": s.rtol, "atol": s.atol,
                 "max_step": s.max_step, "dt0": s.dt, "mode_cutoff_hz": s.mode_cutoff, "force_model": s.force_model,
                 "residual_modes": self.residual, "modes_kept": self.kept,
-                "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds, "solid_representation": "modal"}
+                "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds,
+                "solid_representation": "modal" if self.nodal is None else "nodal"}
 
 
-def residual_modes(model: SolidModel, B, shapes, keep, omega, R):
+def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = False):
     """Residual modes of the dropped modes at the contacts: Rayleigh-Ritz on their static shapes
     Psi = K^-1 B' - Phi W^-2 P' (the retained modes' part removed, so Psi is M-orthogonal to them).
     Psi' K Psi = R and B Psi = R, so the residual modes' static compliance at the contacts is R
-    exactly, and they carry the inertia of those shapes. Returns (omega_r, P_r = B Phi_r, Z) with
-    Phi_r = Psi Z; shapes that vanish (a beam's tangential DOFs) are left out."""
+    exactly, and they carry the inertia of those shapes. Returns (omega_r, P_r = B Phi_r, Z, Psi)
+    with Phi_r = Psi Z; shapes that vanish (a beam's tangential DOFs) are left out. `partial`:
+    `shapes` holds only the modes below the cut-off (every one of them is kept)."""
     from scipy.linalg import eigh
 
     m2 = B.shape[0]
-    if np.all(keep):
-        return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0))
+    if np.all(keep) and not partial:
+        return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0)), np.zeros((model.ndof, 0))
     Psi = splu(model.K.tocsc()).solve(B.T.toarray())
     scale = np.trace(Psi.T @ (model.M @ Psi))  # the static shapes' size, before the retained part goes
     Phi = np.asarray(shapes[:, keep])
     Psi -= Phi @ ((B @ Phi).T / omega[:, None] ** 2)
+    R = B @ Psi  # B K^-1 B' - P W^-2 P': the dropped modes' static compliance at the contacts
     G = Psi.T @ (model.M @ Psi)
     lam, U = np.linalg.eigh(0.5 * (G + G.T))
     ok = lam > 1e-12 * scale
     U = U[:, ok] / np.sqrt(lam[ok])  # Psi U: M-orthonormal
     w2, Y = eigh(U.T @ (0.5 * (R + R.T)) @ U)
     Z = U @ Y
-    return np.sqrt(np.maximum(w2, 0.0)), np.ascontiguousarray(R @ Z), Z
-
-
-def residual_compliance(model: SolidModel, B, P, omega) -> np.ndarray:
-    """R = B K^-1 B' - P W^-2 P': the static compliance of the dropped modes at the contacts."""
-    full = B @ splu(model.K.tocsc()).solve(B.T.toarray())
-    return np.ascontiguousarray(full - (P / omega**2) @ P.T)
+    return np.sqrt(np.maximum(w2, 0.0)), np.ascontiguousarray(R @ Z), Z, Psi

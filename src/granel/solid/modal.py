@@ -155,6 +155,45 @@ def all_modes(model: SolidModel) -> Modes:
     return modes
 
 
+def modes_below(model: SolidModel, f_cut: float) -> Modes:
+    """The eigenmodes up to f_cut [Hz] of a solid too large for all of them (beyond DENSE_LIMIT
+    DOFs), by shift-invert Lanczos at 0 with the count raised until the highest passes f_cut;
+    cached on disk by M, K and f_cut like `all_modes`."""
+    import hashlib
+
+    h = hashlib.sha256(repr(float(f_cut)).encode())
+    for A in (model.M, model.K):
+        A = A.tocsr()
+        A.sort_indices()
+        for arr in (A.indptr, A.indices, A.data):
+            h.update(np.ascontiguousarray(arr).tobytes())
+    stem = cache_dir() / f"modes-below-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
+    omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
+    if omega_path.exists() and shapes_path.exists():
+        try:
+            omega, shapes = np.load(omega_path), np.load(shapes_path)
+            if shapes.shape == (model.ndof, len(omega)):
+                return Modes(omega, shapes)
+        except (OSError, ValueError):
+            pass
+    w_cut, count = 2 * np.pi * f_cut, 64
+    while True:
+        modes = modal_analysis(model, min(count, model.ndof - 1))
+        if modes.omega[-1] > w_cut or modes.count >= model.ndof - 1:
+            break
+        # the mode count grows as f^2 in a plate: aim past the cut-off
+        count = int(min(model.ndof - 1, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
+    keep = modes.omega <= w_cut
+    modes = Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
+    try:
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        _save_atomic(shapes_path, modes.shapes)
+        _save_atomic(omega_path, modes.omega)
+    except OSError:
+        pass
+    return modes
+
+
 def _save_atomic(path, array) -> None:
     import os
 
