@@ -35,9 +35,18 @@ def make_solver(problem: Problem, sparse: bool | None = None):
         from .coupling.solver import ExactSolver
 
         v_ref, e_ref = reference_scales(problem)
-        if settings.mode_cutoff == "auto":
+        auto = settings.mode_cutoff == "auto"
+        if auto:
             settings = replace(settings, mode_cutoff=auto_mode_cutoff(problem.system, v_ref, settings.rtol))
-        modes = None if not solid.ndof else (modes_below(solid, float(settings.mode_cutoff)) if large else all_modes(solid))
+        modes = None
+        if solid.ndof and large:
+            # a large solid: its modes below the cut-off by Lanczos; the automatic cut-off keeps at
+            # most LARGE_SOLID_MODES of them (the propagated modes set the cost of every step)
+            modes = modes_below(solid, float(settings.mode_cutoff), LARGE_SOLID_MODES if auto else None)
+            top = float(modes.omega[-1]) / (2 * np.pi) * (1 + 1e-9)  # below the cut-off when the count capped it
+            settings = replace(settings, mode_cutoff=min(float(settings.mode_cutoff), top))
+        elif solid.ndof:
+            modes = all_modes(solid)
         return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
                            load_kinks(problem.system))
     if large:
@@ -60,6 +69,9 @@ def reference_scales(problem: Problem) -> tuple[float, float]:
         return 1.0, 1.0
     return max(sp for sp, _ in finite), max(0.5 * m * sp * sp for sp, m in finite)
 
+
+# the automatic cut-off's most eigenmodes on a solid beyond solid.modal.DENSE_LIMIT DOFs
+LARGE_SOLID_MODES = 600
 
 # the dropped modes' quasi-static error in the energies, measured on the strong SSGM-side plate
 # case at cut-offs of 0.25-4 MHz: about TRUNCATION_ERROR (f_H / f_cut)^2 of the input

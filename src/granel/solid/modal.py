@@ -155,13 +155,13 @@ def all_modes(model: SolidModel) -> Modes:
     return modes
 
 
-def modes_below(model: SolidModel, f_cut: float) -> Modes:
-    """The eigenmodes up to f_cut [Hz] of a solid too large for all of them (beyond DENSE_LIMIT
-    DOFs), by shift-invert Lanczos at 0 with the count raised until the highest passes f_cut;
-    cached on disk by M, K and f_cut like `all_modes`."""
+def modes_below(model: SolidModel, f_cut: float, max_count: int | None = None) -> Modes:
+    """The eigenmodes up to f_cut [Hz] (at most `max_count` of them) of a solid too large for all
+    of them (beyond DENSE_LIMIT DOFs), by shift-invert Lanczos at 0 with the count raised until the
+    highest passes f_cut; cached on disk by M, K, f_cut and max_count like `all_modes`."""
     import hashlib
 
-    h = hashlib.sha256(repr(float(f_cut)).encode())
+    h = hashlib.sha256(repr((float(f_cut), max_count)).encode())
     for A in (model.M, model.K):
         A = A.tocsr()
         A.sort_indices()
@@ -177,12 +177,13 @@ def modes_below(model: SolidModel, f_cut: float) -> Modes:
         except (OSError, ValueError):
             pass
     w_cut, count = 2 * np.pi * f_cut, 64
+    top = model.ndof - 1 if max_count is None else min(model.ndof - 1, max_count)
     while True:
-        modes = modal_analysis(model, min(count, model.ndof - 1))
-        if modes.omega[-1] > w_cut or modes.count >= model.ndof - 1:
+        modes = modal_analysis(model, min(count, top))
+        if modes.omega[-1] > w_cut or modes.count >= top:
             break
         # the mode count grows as f^2 in a plate: aim past the cut-off
-        count = int(min(model.ndof - 1, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
+        count = int(min(top, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
     keep = modes.omega <= w_cut
     modes = Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
     try:
