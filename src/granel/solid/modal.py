@@ -127,65 +127,51 @@ def all_modes(model: SolidModel) -> Modes:
     """All modes of the solid, cached on disk by a hash of M and K (the plate's 3584 take about
     9 s to compute). The shapes come back memory-mapped: a run reads only the rows at its
     contacts (`at_dofs`), a field plot the whole matrix."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for A in (model.M, model.K):
-        A = A.tocsr()
-        A.sort_indices()
-        for arr in (A.indptr, A.indices, A.data):
-            h.update(np.ascontiguousarray(arr).tobytes())
-    stem = cache_dir() / f"modes-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
-    omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
-    if omega_path.exists() and shapes_path.exists():
-        try:
-            omega = np.load(omega_path)
-            shapes = np.load(shapes_path, mmap_mode="r")
-            if shapes.shape == (model.ndof, len(omega)):
-                return Modes(omega, shapes)
-        except (OSError, ValueError):
-            pass  # a damaged cache file is recomputed and replaced
-    modes = modal_analysis(model, None)
-    try:
-        stem.parent.mkdir(parents=True, exist_ok=True)
-        _save_atomic(shapes_path, modes.shapes)
-        _save_atomic(omega_path, modes.omega)
-    except OSError:
-        pass  # no writable cache: the modes are simply recomputed next time
-    return modes
+    return _cached(model, "modes", "", lambda: modal_analysis(model, None), mmap=True)
 
 
 def modes_below(model: SolidModel, f_cut: float, max_count: int | None = None) -> Modes:
     """The eigenmodes up to f_cut [Hz] (at most `max_count` of them) of a solid too large for all
     of them (beyond DENSE_LIMIT DOFs), by shift-invert Lanczos at 0 with the count raised until the
     highest passes f_cut; cached on disk by M, K, f_cut and max_count like `all_modes`."""
+
+    def compute():
+        w_cut, count = 2 * np.pi * f_cut, 64
+        top = model.ndof - 1 if max_count is None else min(model.ndof - 1, max_count)
+        while True:
+            modes = modal_analysis(model, min(count, top))
+            if modes.omega[-1] > w_cut or modes.count >= top:
+                break
+            # the mode count grows as f^2 in a plate: aim past the cut-off
+            count = int(min(top, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
+        keep = modes.omega <= w_cut
+        return Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
+
+    return _cached(model, "modes-below", repr((float(f_cut), max_count)), compute, mmap=False)
+
+
+def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool) -> Modes:
+    """Modes from the disk cache (by a hash of M, K and `key`), or `compute()` and store them
+    (atomically; without a writable cache they are simply recomputed next time)."""
     import hashlib
 
-    h = hashlib.sha256(repr((float(f_cut), max_count)).encode())
+    h = hashlib.sha256(key.encode())
     for A in (model.M, model.K):
         A = A.tocsr()
         A.sort_indices()
         for arr in (A.indptr, A.indices, A.data):
             h.update(np.ascontiguousarray(arr).tobytes())
-    stem = cache_dir() / f"modes-below-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
+    stem = cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
     omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
     if omega_path.exists() and shapes_path.exists():
         try:
-            omega, shapes = np.load(omega_path), np.load(shapes_path)
+            omega = np.load(omega_path)
+            shapes = np.load(shapes_path, mmap_mode="r" if mmap else None)
             if shapes.shape == (model.ndof, len(omega)):
                 return Modes(omega, shapes)
         except (OSError, ValueError):
-            pass
-    w_cut, count = 2 * np.pi * f_cut, 64
-    top = model.ndof - 1 if max_count is None else min(model.ndof - 1, max_count)
-    while True:
-        modes = modal_analysis(model, min(count, top))
-        if modes.omega[-1] > w_cut or modes.count >= top:
-            break
-        # the mode count grows as f^2 in a plate: aim past the cut-off
-        count = int(min(top, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
-    keep = modes.omega <= w_cut
-    modes = Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
+            pass  # a damaged cache file is recomputed and replaced
+    modes = compute()
     try:
         stem.parent.mkdir(parents=True, exist_ok=True)
         _save_atomic(shapes_path, modes.shapes)
