@@ -421,14 +421,18 @@ def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = Fa
     if np.all(keep) and not partial:
         return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0)), np.zeros((model.ndof, 0))
     Psi = splu(model.K.tocsc()).solve(B.T.toarray())
-    scale = np.trace(Psi.T @ (model.M @ Psi))  # the static shapes' size, before the retained part goes
+    full = np.abs(np.diag(B @ Psi)).max()  # the largest static compliance at a contact
     Phi = np.asarray(shapes[:, keep])
     Psi -= Phi @ ((B @ Phi).T / omega[:, None] ** 2)
     R = B @ Psi  # B K^-1 B' - P W^-2 P': the dropped modes' static compliance at the contacts
-    G = Psi.T @ (model.M @ Psi)
+    R = 0.5 * (R + R.T)
+    # the shapes the contacts feel: R's range (a beam's tangential DOFs feel none)
+    lam, V = np.linalg.eigh(R)
+    V = V[:, lam > 1e-12 * full]
+    G = V.T @ (Psi.T @ (model.M @ Psi)) @ V
     lam, U = np.linalg.eigh(0.5 * (G + G.T))
-    ok = lam > 1e-12 * scale
-    U = U[:, ok] / np.sqrt(lam[ok])  # Psi U: M-orthonormal
-    w2, Y = eigh(U.T @ (0.5 * (R + R.T)) @ U)
+    ok = lam > 1e-12 * lam.max() if lam.size else lam > 0
+    U = V @ (U[:, ok] / np.sqrt(lam[ok]))  # Psi U: M-orthonormal
+    w2, Y = eigh(U.T @ R @ U)
     Z = U @ Y
     return np.sqrt(np.maximum(w2, 0.0)), np.ascontiguousarray(R @ Z), Z, Psi
