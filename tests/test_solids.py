@@ -261,3 +261,27 @@ def test_newmark_forced_mode_matches_the_analytic_recursion(paper_plate, paper_p
     assert newmark_period_ratio(w, dt) == pytest.approx(1 + x**2 / 12 - x**4 / 180, abs=1e-4)
     other = md.shapes[:, 0] @ (m.M @ s.x)
     assert abs(other) < 1e-9 * Xs
+
+
+def test_the_plate_cache_gives_the_assembled_plate(tmp_path, monkeypatch):
+    """`build_plate` stores the assembled plate on disk and gives it back without scikit-fem: the
+    same matrices, contacts and geometry, element energies and full-field displacements (the
+    figures' scikit-fem basis assembled again on first use); a damaged cache file is rebuilt."""
+    from granel.solid import plate
+
+    monkeypatch.setenv("GRANEL_CACHE", str(tmp_path))
+    layers = [LayerSpec("A", "left", 0.05, 1e-3), LayerSpec("B", "right", 0.04, 5e-4)]
+    args = (0.0, 0.0, 0.01, 0.1, 1e-3, 200e9, 0.3, 7850.0, layers, PlateMesh(6, 1.6, 2e-3, 1.5))
+    fresh = build_plate(*args)
+    cached = build_plate(*args)
+    assert isinstance(cached, plate.CachedPlate) and not isinstance(fresh, plate.CachedPlate)
+    assert abs(fresh.M - cached.M).max() == 0 and abs(fresh.K - cached.K).max() == 0
+    assert cached.contacts == fresh.contacts and cached.info == fresh.info
+    q = np.random.default_rng(0).normal(size=fresh.ndof) * 1e-6
+    assert np.array_equal(cached.full_displacement(q), fresh.full_displacement(q))
+    for a, b in zip(cached.element_energies(q, q), fresh.element_energies(q, q)):
+        assert np.allclose(a, b, rtol=1e-12, atol=0)
+    (path,) = list(tmp_path.glob("plate-*.npz"))
+    path.write_bytes(b"not a cache")
+    again = build_plate(*args)
+    assert not isinstance(again, plate.CachedPlate) and abs(again.K - fresh.K).max() == 0
