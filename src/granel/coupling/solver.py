@@ -261,13 +261,12 @@ class ExactSolver:
         dy = np.zeros_like(y)
         rhs(0.0, y, dy, self.stepper.model, self.stepper.still, 0.0)
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
-        self.st = exact.initial_state(y, dy, nr, nc, len(self.cache.nodes), self._ledger(y), max(0, min(level, self.cfg.levels)))
-        self.t_out, self._k, self._batch = 0.0, 0, None
-
-    def _ledger(self, y) -> float:
-        """E_granular + D - W of the initial state (the solid starts at rest)."""
-        g = GranularState(y, 0.0)
-        return float(sum(x.sum() for x in self.stepper.energies(g))) + g.dissipated_viscous + g.dissipated_friction - g.input_work
+        self.st = exact.initial_state(y, dy, nr, nc, len(self.cache.nodes), 0.0, max(0, min(level, self.cfg.levels)))
+        self.t_out, self._k = 0.0, 0
+        self._single_batch(0, y, np.zeros(nr), np.zeros(nr), np.zeros((nc, 2)))  # the output at t = 0
+        q, n = self._batch["q"], self.system.n
+        ledger = float(q.media[0].sum()) + y[6 * n] + y[6 * n + 1] - y[6 * n + 2]  # E_granular + D - W (13)
+        self.st.clock[4] = self.st.clock[5] = ledger
 
     def save(self) -> dict:
         out = {f"st:{k}": np.asarray(v) for k, v in self.st._asdict().items() if k != "step_motion"}
@@ -330,13 +329,21 @@ class ExactSolver:
             elif status in (core.BALANCE_LOST, core.NO_CONVERGENCE, core.NON_FINITE):
                 error = SolverError(self._diagnosis(status))
                 break
-        n = int(done[0])
+        self._set_batch(k0, int(done[0]), out, error)
+
+    def _set_batch(self, k0: int, n: int, out, error=None) -> None:
+        """Outputs k0 .. k0 + n - 1 from their states `out` (y, eta, eta', F), with the
+        quantities of eqs. (11)-(13) computed by one compiled call."""
+        K, nc = len(out[0]), len(self.system.solid_contacts)
         q = exact.OutputQuantities(np.zeros((K, len(self.system.media))), np.zeros((K, 2)), np.zeros((K, nc, 2)), np.zeros(K),
                                    np.zeros((K, 2), np.int64))
         if n:
             exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], self.stepper.model, self.solid,
                                     self.system.medium_index, len(self.system.media), q)
         self._batch = {"k0": k0, "done": n, "out": out, "q": q, "error": error, "model": self.stepper.model}
+
+    def _single_batch(self, k: int, y, eta, etad, F) -> None:
+        self._set_batch(k, 1, (y[None].copy(), eta[None].copy(), etad[None].copy(), F[None].copy()))
 
     def _diagnosis(self, status: int) -> str:
         t, h_min = self.st.clock[0], self.cfg.h_max / 2 ** (self.cfg.levels / 4)
@@ -348,28 +355,25 @@ class ExactSolver:
             "Newton on the interface forces did not converge"
         return f"t = {t:.6e} s: {what} even at the smallest step ({h_min:.3e} s); lower k_s or raise simulation.max_halvings"
 
-    def _dense(self):
-        """The state at the current output: the batch's entry, or (at the start, or just after a
-        resume) dense output of the last step."""
-        b = self._batch
-        if b is not None and b["k0"] <= self._k < b["k0"] + b["done"]:
-            i = self._k - b["k0"]
-            return tuple(a[i] for a in b["out"])
-        nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
-        y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
-        exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
-        return y, eta, etad, F
-
-    def observe(self) -> dict:
+    def _current(self) -> int:
+        """The index of the current output in the batch, made first where it is missing (just
+        after a resume: dense output of the restored last step)."""
         b = self._batch
         if b is None or not (b["k0"] <= self._k < b["k0"] + b["done"]):
-            y, eta, etad, F = self._dense()
-            su = (self.solid.P @ eta).reshape(-1, 2)
-            ek = 0.5 * float(etad @ etad)
-            ep = 0.5 * float(eta @ (self.solid.omega**2 * eta))
-            return observation(self.stepper, GranularState(y, self.t_out), su, (ek, ep), F, self.solid.frame.tangent,
-                               self.system)
-        i = self._k - b["k0"]
+            nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
+            y, eta, etad, F = np.empty_like(self.st.y), np.empty(nr), np.empty(nr), np.empty((nc, 2))
+            exact.dense_state(self.st, self.solid, self.stepper.model, self.t_out, y, eta, etad, F)
+            self._single_batch(self._k, y, eta, etad, F)
+        return self._k - self._batch["k0"]
+
+    def _dense(self):
+        """The state (y, eta, eta', F) at the current output."""
+        i = self._current()
+        return tuple(a[i] for a in self._batch["out"])
+
+    def observe(self) -> dict:
+        i = self._current()
+        b = self._batch
         y, F, q = b["out"][0][i], b["out"][3][i], b["q"]
         g = GranularState(y, self.t_out)
         normals = np.array([c.normal for c in self.system.solid_contacts], float).reshape(-1, 2)
@@ -381,7 +385,8 @@ class ExactSolver:
                 "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
                 "force_normal": np.einsum("ij,ij->i", F, normals),
                 "force_tangential": np.einsum("ij,ij->i", F, self.solid.frame.tangent),
-                "overlap_ratio": float(q.overlap[i]), "overlap_at": contact_label(self.system, b["model"], int(q.where[i, 0]), int(q.where[i, 1]))}
+                "overlap_ratio": float(q.overlap[i]),
+                "overlap_at": contact_label(self.system, b["model"], int(q.where[i, 0]), int(q.where[i, 1]))}
 
     def solid_snapshot(self) -> dict:
         """All eigenmodes: the retained ones' state, and the residual modes' state projected on the
