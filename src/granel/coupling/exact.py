@@ -185,6 +185,7 @@ class Work(NamedTuple):
     touching: np.ndarray  # (nc,) bool
     idx: np.ndarray  # (nn 2nc,) int: the touching unknowns
     na: np.ndarray  # (1,) int: their count
+    mslot: np.ndarray  # (3,) int: the matrix's step level, the last step's iterations, the iteration it was built at
     piv: np.ndarray
     pivA: np.ndarray
     Ma: np.ndarray
@@ -212,7 +213,8 @@ def work_for(y, nc, nr, nb):
                 motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), v(n), v(n),
                 v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((nr, 2 * nn)), v(1), v(2), np.zeros((nb, nr)),
                 v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64),
-                np.zeros(1, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros((n, n)), v(n),
+                np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
+                np.zeros((n, n)), v(n),
                 np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), v(2 * nn), v(nn), v(nn), v(nn),
                 v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)))
 
@@ -698,13 +700,19 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
         if ok or not cfg.newton:
             w.X[:] = w.G
             if ok:
+                w.mslot[1] = it
                 return core.CONVERGED, it
             continue
         # the matrix of the step's first iterate serves the later ones (a chord Newton: as few
         # iterations as a fresh matrix each time, measured), unless a contact opened or closed
-        if _touching(w, nc, nn) or it == 1:
+        changed = _touching(w, nc, nn)
+        if changed or (it == 1 and (w.mslot[0] != slot or w.mslot[1] > 3)) or (it > 1 and w.mslot[2] == 0):
             if not _newton_matrix(w, cache, slot, solid.frame):
                 return core.NO_CONVERGENCE, it
+            w.mslot[0] = slot
+            w.mslot[2] = it  # built at this iteration of this step (0: inherited from the last step)
+        elif it == 1:
+            w.mslot[2] = 0
         w.Xprev[:] = w.X
         _newton_step(w, cache, slot, solid.frame, model.law)
     return core.NO_CONVERGENCE, cfg.max_iterations
