@@ -427,7 +427,10 @@ def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = Fa
         return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0)), np.zeros((model.ndof, 0))
     Psi = splu(model.K.tocsc()).solve(B.T.toarray())
     full = np.abs(np.diag(B @ Psi)).max()  # the largest static compliance at a contact
-    Phi = np.asarray(shapes[:, keep])
+    nk = int(np.count_nonzero(keep))
+    # the modes ascend, so the retained ones are the first columns: a slice reads a memory-mapped
+    # matrix only that far along each row
+    Phi = np.asarray(shapes[:, :nk]) if np.all(keep[:nk]) else np.asarray(shapes[:, keep])
     Psi -= Phi @ ((B @ Phi).T / omega[:, None] ** 2)
     R = B @ Psi  # B K^-1 B' - P W^-2 P': the dropped modes' static compliance at the contacts
     R = 0.5 * (R + R.T)
