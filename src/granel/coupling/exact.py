@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
-from ..granular.contact import friction_map_slope
+from ..granular.contact import friction_map_slope, tanh_friction
 from ..granular.kernels import (friction_rate, granule_energies, interface_forces, moved_beyond, overlaps, rhs, rk4_step,
                                 rk4_substepped)
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
@@ -454,7 +454,7 @@ def _friction_residual(s, s0, vt0, normal, B, mu, ks, out):
         vt = vt0[j]
         for b in range(nn):
             vt -= B[j, b] * (s[b] - s0[b])
-        out[j] = s[j] - mu * normal[j] * math.tanh(ks * vt)
+        out[j] = s[j] + tanh_friction(normal[j], vt, mu, ks)  # eq. (5): the force on the solid is -ft
         total += out[j] * out[j]
     return total
 
@@ -482,10 +482,8 @@ def local_friction_solve(s, s0, vt0, normal, B, law, r, Jl):
             vt = vt0[j]
             for b in range(nn):
                 vt -= B[j, b] * (s[b] - s0[b])
-            th = math.tanh(ks * vt)
-            g = mu * normal[j] * ks * (1.0 - th * th)
             for b in range(nn):
-                Jl[j, b] = (1.0 if j == b else 0.0) + g * B[j, b]
+                Jl[j, b] = (1.0 if j == b else 0.0) + friction_map_slope(mu, ks, normal[j], vt, B[j, b])
         if nn == 1:
             ds0, ds1 = r[0] / Jl[0, 0], 0.0
         else:

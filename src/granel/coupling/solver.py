@@ -238,6 +238,7 @@ class ExactSolver:
             self.P_drop, self.omega_drop = np.zeros((2 * nc, 0)), np.zeros(0)
         self.modes = modes
         self.solid = exact.ExactSolid(omega, P, frame)
+        self.normals = np.array([c.normal for c in system.solid_contacts], float).reshape(-1, 2)
         fixed = not settings.adaptive
         levels = 4 * settings.halvings  # fixed steps use the smaller levels only to retry a failed step
         h_max = settings.dt if fixed else settings.max_step
@@ -376,14 +377,13 @@ class ExactSolver:
         b = self._batch
         y, F, q = b["out"][0][i], b["out"][3][i], b["q"]
         g = GranularState(y, self.t_out)
-        normals = np.array([c.normal for c in self.system.solid_contacts], float).reshape(-1, 2)
         ek, ep = float(q.solid[i, 0]), float(q.solid[i, 1])
         em = q.media[i].copy()
         dv, df, w = g.dissipated_viscous, g.dissipated_friction, g.input_work
         return {"pos": g.pos.copy(), "theta": g.theta.copy(), "vel": g.vel.copy(), "omega": g.omega.copy(), "energy_media": em,
                 "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
                 "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
-                "force_normal": np.einsum("ij,ij->i", F, normals),
+                "force_normal": np.einsum("ij,ij->i", F, self.normals),
                 "force_tangential": np.einsum("ij,ij->i", F, self.solid.frame.tangent),
                 "overlap_ratio": float(q.overlap[i]),
                 "overlap_at": contact_label(self.system, b["model"], int(q.where[i, 0]), int(q.where[i, 1]))}
