@@ -40,16 +40,20 @@ def test_adaptive_steps_meet_the_accuracy_targets(reference):
     assert int(ds.attrs["solver_modes_kept"]) < 78  # the high modes are replaced by residual modes
 
 
-def test_error_falls_with_the_tolerance(reference):
-    """Tighter tolerances, more steps, smaller errors (every mode kept, as in the reference)."""
-    errs, steps = [], []
-    for tol in (1e-3, 1e-6):
-        ds = run_scenario(S.load("paper", BEAM_SSGM + ['simulation.integrator="exact"', f"simulation.ledger_tol={tol}",
-                                                       f"simulation.rtol={tol / 2}", "simulation.mode_cutoff=1e12"]))
-        errs.append(max(deviations(ds, reference)))
-        steps.append(ds.attrs["solver_steps"])
-    assert steps[0] < steps[1]
-    assert errs[1] < 0.1 * errs[0]
+def test_error_falls_with_the_tolerance():
+    """Tighter tolerances, more steps, smaller errors (every mode kept, as in the reference; 0.3 ms,
+    so that the beam rings under many contacts). Measured: 304 and 2102 steps; energies 5.3e-5
+    and 1.5e-6 of the input, far granule 4.1e-5 and 2.5e-6, balance 1.6e-5 and 5.3e-8."""
+    base = [*BEAM_SSGM, 'simulation.duration="0.3ms"', 'simulation.integrator="exact"', "simulation.mode_cutoff=1e12"]
+    ref = run_scenario(S.load("paper", [*base, "simulation.adaptive=false", 'simulation.dt="5ns"']))
+    out = []
+    for tol in (1e-3, 1e-7):
+        ds = run_scenario(S.load("paper", [*base, f"simulation.ledger_tol={tol}", f"simulation.rtol={tol / 2}"]))
+        out.append((ds.attrs["solver_steps"], errors(ds, ref)))
+    (n0, e0), (n1, e1) = out
+    assert n0 < n1
+    assert e1["energy"] < 0.1 * e0["energy"] and e1["v_far"] < 0.1 * e0["v_far"]
+    assert e1["balance"] < 0.01 * e0["balance"]
 
 
 def _coupled_orders():
@@ -176,8 +180,9 @@ def test_twelve_paper_cases_at_default_tolerances(solid, exc, shock):
     default tolerances, against modal Newmark at a fixed 5 ns (an independent solid integrator;
     its own error there is about (5/40)^2 of its 1.6e-3 at 40 ns): energies within 1e-3 of the
     input, the excited and the far measured granule's velocities within 1e-3 (relative L2), and
-    the balance (13) within 1e-6. Measured: energies at most 7.5e-5, velocities at most 1.9e-4
-    (both on the strong SSGM-side beam case), balance at most 4.9e-7."""
+    the balance (13) within 1e-6. Measured: energies at most 7.7e-5, velocities at most 2.8e-4
+    (both on the strong SSGM-side beam case), balance at most 5.0e-7 (the control's bound is
+    8e-7 of the largest load's energy)."""
     base = [f'solid.kind="{solid}"', f'excitations.0.granule="{exc}"', f'excitations.0.shock="{shock}"']
     ref = run_scenario(S.load("paper", base + ['simulation.integrator="newmark"', 'simulation.dt="5ns"']))
     ds = run_scenario(S.load("paper", base))  # the default: the exact integrator

@@ -28,12 +28,14 @@ returns the contact law's forces (eqs. 2, 5) at the nodes, the granular state at
 by cubic Hermite interpolation of the step's ends and derivatives. Newton on X = G(X) uses the
 contact law's derivatives and each contact granule's own response (`_granule_response`).
 
-Local error of the whole coupled step: the embedded third-order solution of classical RK4 with the
-end-of-step derivative (FSAL weights (1, 2, 2, 0, 1)/6, err = h/6 (k4 - k5) per RK4 sub-step) on
-the granules' velocities and spin velocities against atol + rtol v_ref, and the step's defect of
-the energy ledger (13) against its share h / T of ledger_tol e_ref. A PI controller picks the next
-step on a geometric grid h_k = h_max 2^(-k/4) (so the per-step operators are cached), a step never
-crosses a load's kink, and outputs come by dense output inside the step that passes them.
+Local error of the whole coupled step (`step_error`): the embedded third-order solution of
+classical RK4 with the end-of-step derivative (FSAL weights (1, 2, 2, 0, 1)/6, err = h/6 (k4 - k5)
+per RK4 sub-step) on the granules' velocities and spin velocities against atol + rtol v_ref, and
+the step's defect of the energy ledger (13) against the run's bound ledger_tol e_ref: its
+random-walk share (the defects are RK4's and the interface's local energy errors, fifth order and
+of either sign) and the room the ledger's drift has left. The controller (`next_level`) picks the
+next step on a geometric grid h_k = h_max 2^(-k/4) (so the per-step operators are cached), a step
+never crosses a load's kink, and outputs come by dense output inside the step that passes them.
 """
 
 from __future__ import annotations
@@ -52,6 +54,14 @@ from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
 GRID_PER_OCTAVE = 4
+# the energy-ledger control (`step_error`, `control_error`): a step's defect of the ledger (13) is
+# accepted up to LEDGER_ACCEPT times its share (`ledger_share`), and the running mean square of
+# defect / share (each clipped at LEDGER_CLIP, filter weight LEDGER_FILTER) aims at LEDGER_RMS^2
+LEDGER_RMS = 0.4
+LEDGER_FILTER = 0.2
+LEDGER_CLIP = 1.0
+LEDGER_ACCEPT = 2.0
+ORDER = 4.5  # a step's ledger part goes as h^5 over a share as h^(1/2)
 FORCE_NODES = {"quadratic": (0.0, 0.5, 1.0), "linear": (0.0, 1.0)}
 
 
@@ -102,7 +112,7 @@ class ExactConfig(NamedTuple):
     atol: float  # [m/s]
     v_ref: float  # velocity scale of the error norm [m/s]
     e_ref: float  # energy scale of the error norm [J]
-    ledger_tol: float  # the energy ledger (13) may drift by ledger_tol e_ref over `duration`
+    ledger_tol: float  # the energy ledger (13) stays within ledger_tol e_ref
     ledger_limit: float  # [J] a drift beyond this stops the run (the control has failed)
     duration: float
     newton: bool
@@ -118,8 +128,9 @@ class ExactState(NamedTuple):
     modal projection q = P'F, the contacts' displacement u and velocity w (2nc,), |N| and v_t; and
     the last step, for dense output and the next step's predictor: its start (suffix 0), its force
     data Fs (nb, nc, 2) at the nodes (Fs[-1] is F) with their projections qs (nb, nr) and basis Ts
-    (nb, 4), and the contacts' motion over it. clock = [t, t0, err_prev, friction rate of the last
-    step, energy ledger (13), its initial value, the controller's continuous level];
+    (nb, 4), and the contacts' motion over it. clock = [t, t0, the controller's running mean square
+    of the ledger part, friction rate of the last step, energy ledger (13), its initial value, the
+    controller's continuous level];
     meta = [grid level of the next step, rejected]."""
 
     y: np.ndarray
@@ -148,7 +159,7 @@ def initial_state(y, dy, nr: int, nc: int, nb: int, ledger: float, level: int) -
     z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
     return ExactState(y, dy, z(nr), z(nr), zc(), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), z(nr), z(nr),
                       np.zeros((nb, nc, 2)), np.zeros((nb, nr)), np.zeros((nb, 4)), Motion(zc(), zc(), zc(), zc(), zc(), zc()),
-                      np.array([0.0, 0.0, 1e-4, 0.0, ledger, ledger, float(level)]), np.array([level, 0], np.int64))
+                      np.array([0.0, 0.0, 0.0, 0.0, ledger, ledger, float(level)]), np.array([level, 0], np.int64))
 
 
 class Work(NamedTuple):
@@ -173,7 +184,7 @@ class Work(NamedTuple):
     iface1: InterfaceForces  # ... and at the second (quadratic model)
     ww: np.ndarray  # (nr, 2 nn) modal scratch
     rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
-    parts: np.ndarray  # (2,): the last step's scaled velocity error and energy-ledger defect
+    parts: np.ndarray  # (3,): the last step's scaled velocity error and energy-ledger parts (`step_error`)
     qdat: np.ndarray  # (nb, nr): the modal force data of the trial step (P'F0, P'X)
     eta1: np.ndarray  # (nr,): the modes at the trial step's end
     etad1: np.ndarray
@@ -211,7 +222,7 @@ def work_for(y, nc, nr, nb):
     v = lambda k: np.zeros(k)  # noqa: E731
     return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
                 motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), v(n), v(n),
-                v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((nr, 2 * nn)), v(1), v(2), np.zeros((nb, nr)),
+                v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((nr, 2 * nn)), v(1), v(3), np.zeros((nb, nr)),
                 v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64),
                 np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
                 np.zeros((n, n)), v(n),
@@ -751,16 +762,37 @@ def trial_ledger(st, solid, cache, slot, model, w):
         w.eta1[i] = e
         w.etad1[i] = v
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
-    kin, rot, pot = granule_energies(w.ytr, model, w.un[nn - 1].reshape(m2 // 2, 2))
-    n = kin.shape[0]
-    return es + kin.sum() + rot.sum() + pot.sum() + w.ytr[6 * n] + w.ytr[6 * n + 1] - w.ytr[6 * n + 2]
+    return es + granular_ledger(w.ytr, model, w.un[nn - 1].reshape(m2 // 2, 2))
 
 
 @njit(cache=True)
-def step_error(w, cfg, granules, h, defect):
-    """The scaled local error of the coupled step (<= 1: accept): the largest embedded RK4 error
-    of a granule's velocity or spin velocity R omega against atol + rtol v_ref, and the step's
-    energy-ledger defect (13) against its share h / duration of ledger_tol e_ref."""
+def granular_ledger(y, model, su):
+    """The granules' part of the ledger (13), E_granular + D - W, with the solid contact points
+    displaced by su (nc, 2)."""
+    kin, rot, pot = granule_energies(y, model, su)
+    n = kin.shape[0]
+    return kin.sum() + rot.sum() + pot.sum() + y[6 * n] + y[6 * n + 1] - y[6 * n + 2]
+
+
+@njit(cache=True)
+def state_ledger(y, eta, etad, solid, model):
+    """E_solid + E_granular + D - W (eq. 13) of a state (the granules y, the modes eta, eta')."""
+    nc = solid.P.shape[0] // 2
+    es = 0.0
+    for i in range(eta.shape[0]):
+        es += 0.5 * (etad[i] * etad[i] + solid.omega[i] ** 2 * eta[i] * eta[i])
+    su = np.dot(solid.P, eta) if eta.shape[0] else np.zeros(2 * nc)
+    return es + granular_ledger(y, model, su.reshape(nc, 2))
+
+
+@njit(cache=True)
+def step_error(w, cfg, granules, t, h, defect, drift):
+    """The parts of the scaled local error of the coupled step from t to t + h, in w.parts: [0] the
+    largest embedded RK4 error of a granule's velocity or spin velocity R omega against
+    atol + rtol v_ref; [1] the step's defect of the energy ledger (13) against its share of the
+    run's bound (`ledger_share`), the ledger having drifted by `drift` so far; [2] the drift after
+    the step against the bound tol = ledger_tol e_ref. True if the step is accepted: [0] <= 1,
+    [1] <= LEDGER_ACCEPT, [2] <= 1."""
     radius = granules.radius
     n = radius.shape[0]
     V = 3 * n
@@ -769,8 +801,9 @@ def step_error(w, cfg, granules, h, defect):
     for i in range(n):
         ev = max(ev, abs(w.err[V + 2 * i]), abs(w.err[V + 2 * i + 1]), radius[i] * abs(w.err[OM + i]))
     w.parts[0] = ev / (cfg.atol + cfg.rtol * cfg.v_ref)
-    w.parts[1] = abs(defect) / (cfg.ledger_tol * cfg.e_ref * h / cfg.duration)
-    return max(w.parts[0], w.parts[1])
+    w.parts[1] = abs(defect) / ledger_share(cfg, t, h, drift)
+    w.parts[2] = abs(drift + defect) / (cfg.ledger_tol * cfg.e_ref)
+    return w.parts[0] <= 1.0 and w.parts[1] <= LEDGER_ACCEPT and w.parts[2] <= 1.0
 
 
 @njit(cache=True)
@@ -828,19 +861,46 @@ def friction_slopes(st, law, cache, slot, frame, lam):
         lam[c] = friction_map_slope(law.mu, law.k_s, st.normal[c], st.vrel[c], ctt)
 
 
+@njit(cache=True, inline="always")
+def ledger_share(cfg, t, h, drift):
+    """What a step of size h from time t may add to the energy ledger (13), which has drifted by
+    `drift` so far, tol = ledger_tol e_ref being the run's bound: its random-walk share
+    tol sqrt(h / T) while the drift is small (fading out as the drift reaches tol / 2), or the
+    room left spread evenly over the time left, (tol - |drift|) h / (T - t), whichever is larger.
+    The defects, RK4's and the interface's local energy errors, are fifth order and mostly of
+    either sign (they cancel over a collision), so they add up like a random walk, whose spread
+    over the run is tol when every step spends its share; where they keep one sign, the drift
+    grows and the even spread of the room left takes over, so the drift never passes tol."""
+    tol = cfg.ledger_tol * cfg.e_ref
+    room = max(tol - abs(drift), 0.0)
+    walk = tol * math.sqrt(h / cfg.duration) * max(0.0, 1.0 - 2.0 * abs(drift) / tol)
+    return max(walk, room * h / max(cfg.duration - t, h))
+
+
 @njit(cache=True)
-def next_level(lev, err, err_prev, cfg):
-    """PI control (exponents 0.7/4 and 0.4/4 for the third-order estimate) with a 0.9 safety
-    factor and growth between 1/5 and 2, on the continuous level lev (the step h_max 2^(-lev/4));
-    the step taken is on the grid at ceil(lev), so that operators are cached per grid level while
-    small changes still add up (rounding each step's change to the grid stalled the step
-    wherever the PI factor stayed between 1 and 2^(1/4): at errors around 0.07)."""
+def next_level(lev, err, cfg):
+    """The next continuous level lev (the step h_max 2^(-lev/4)) for a scaled error err that goes
+    as h^ORDER, aiming at err = 1, with growth between 1/5 and 2; the step taken is on the grid
+    at ceil(lev), so that operators are cached per grid level while small changes still add up."""
     if not cfg.adaptive:
         return 0.0
-    e = max(err, 1e-10)
-    fac = 0.9 * e ** (-0.7 / 4.0) * max(err_prev, 1e-4) ** (0.4 / 4.0)
-    fac = min(2.0, max(0.2, fac))
+    fac = min(2.0, max(0.2, max(err, 1e-10) ** (-1.0 / ORDER)))
     return min(float(cfg.levels), max(0.0, lev - GRID_PER_OCTAVE * math.log2(fac)))
+
+
+@njit(cache=True)
+def control_error(w, st, h):
+    """The scaled error the controller aims at 1 after an accepted step of size h: the velocity
+    part, the ledger's random-walk part as the running mean square of the last steps' parts (the
+    defect's size swings within a collision: one step's value is a poor guide to the next), each
+    clipped at LEDGER_CLIP and rescaled to h, over LEDGER_RMS, and twice the room part (a step
+    spends at most half the room left). Updates the running mean square in st.clock[2]."""
+    hp = st.clock[0] - st.clock[1]
+    r2 = min(w.parts[1], LEDGER_CLIP) ** 2
+    if hp > 0.0 and st.clock[2] > 0.0:
+        r2 = (1.0 - LEDGER_FILTER) * st.clock[2] * (h / hp) ** (2.0 * ORDER) + LEDGER_FILTER * r2
+    st.clock[2] = r2
+    return max(w.parts[0], math.sqrt(r2) / LEDGER_RMS, 2.0 * w.parts[2])
 
 
 @njit(cache=True, inline="always")
@@ -850,17 +910,24 @@ def grid_level(lev):
 
 
 @njit(cache=True)
-def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log, k, w):
-    """Accepted steps until the clock passes t_target (dense output covers the output itself),
-    logged from entry k of `log` on. Returns (status, entries logged): core.DONE, core.REBUILD,
-    core.LOG_FULL, core.NO_CONVERGENCE, core.NON_FINITE or core.BALANCE_LOST (the ledger (13)
-    drifted beyond cfg.ledger_limit)."""
+def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, out, done):
+    """Accepted steps through the output times `targets`, from output done[0] on: a step that
+    reaches outputs fills their states in `out` (y, eta, eta', F per output) by dense output
+    (`dense_state`) and, when adaptive, is accepted only if their energy ledgers (13) stay within
+    the bound too (inside a step the interface's work is not the symmetric quadrature it is at
+    the step's end); done[0] counts the outputs filled. Returns (status, steps logged): core.DONE
+    once all are filled, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE, core.NON_FINITE or
+    core.BALANCE_LOST (the ledger (13) drifted beyond cfg.ledger_limit)."""
+    w = work_for(st.y, st.F.shape[0], st.eta.shape[0], cache.nodes.shape[0])
     nc = st.F.shape[0]
+    nb = cache.nodes.shape[0]
     n = model.granules.radius.shape[0]
     lim2 = cfg.max_disp * cfg.max_disp
     lam = np.zeros(nc)
     off = cache.ready.shape[0] - 1
-    while st.clock[0] < t_target:
+    oy, oeta, oetad, oF = out
+    k = 0
+    while done[0] < targets.shape[0]:
         if k >= log.t.shape[0]:
             return core.LOG_FULL, k
         level = st.meta[0]
@@ -882,46 +949,45 @@ def advance_exact(st, model, ref_pos, solid, cache, cfg, t_target, kinks, log, k
                 continue
             return status, k
         ledger = trial_ledger(st, solid, cache, slot, model, w)
-        err = step_error(w, cfg, model.granules, h, ledger - st.clock[4]) if cfg.adaptive else 0.0
-        if err > 1.0 and level < cfg.levels:
-            st.clock[6] = max(level + 1.0, next_level(st.clock[6], err, 1.0, cfg))
+        ok = step_error(w, cfg, model.granules, t, h, ledger - st.clock[4], st.clock[4] - st.clock[5])
+        # the outputs this step reaches, by dense output from its start (the last one may be its end)
+        filled = 0
+        worst_dense = 0.0
+        while done[0] + filled < targets.shape[0] and targets[done[0] + filled] <= (t + h) * (1.0 + 1e-12):
+            o = done[0] + filled
+            tau = targets[o] - t
+            if tau >= h * (1.0 - 1e-12):
+                oy[o, :] = w.ytr
+                oeta[o, :] = w.eta1
+                oetad[o, :] = w.etad1
+                for r in range(2 * nc):
+                    oF[o, r // 2, r % 2] = w.X[(nb - 2) * 2 * nc + r]
+            else:
+                dense(trial_step(st, cache, slot, w), solid, model, tau, DenseOut(oy[o], oeta[o], oetad[o], oF[o]))
+                defect = state_ledger(oy[o], oeta[o], oetad[o], solid, model) - st.clock[4]
+                worst_dense = max(worst_dense, abs(st.clock[4] - st.clock[5] + defect) / (cfg.ledger_tol * cfg.e_ref))
+            filled += 1
+        if cfg.adaptive and (not ok or worst_dense > 1.0) and level < cfg.levels:
+            worst = max(w.parts[0], w.parts[1] / LEDGER_ACCEPT, w.parts[2], worst_dense)
+            st.clock[6] = max(level + 1.0, next_level(st.clock[6], worst, cfg))
             st.meta[0] = grid_level(st.clock[6])
             st.meta[1] += 1
             continue
         if abs(ledger - st.clock[5]) > cfg.ledger_limit:
             return core.BALANCE_LOST, k  # even the smallest step lost the energy balance (13)
+        ectl = control_error(w, st, h)  # before the clock moves: it rescales from the last step
         accept(st, cache, slot, h, w, w.rate[0], ledger)
+        done[0] += filled
         friction_slopes(st, model.law, cache, slot, solid.frame, lam)
         log.t[k] = st.clock[0]
         log.h[k] = h
         log.iterations[k] = its
         log.lam[k, :] = lam
         k += 1
-        st.clock[6] = next_level(st.clock[6], err, st.clock[2], cfg)
+        st.clock[6] = next_level(st.clock[6], ectl, cfg)
         st.meta[0] = grid_level(st.clock[6])
-        st.clock[2] = max(err, 1e-4)
         if moved_beyond(st.y, n, ref_pos, lim2):
             return core.REBUILD, k
-    return core.DONE, k
-
-
-@njit(cache=True)
-def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, out, done):
-    """Accepted steps through the output times `targets`, the state at each by dense output into
-    `out` (y, eta, eta', F per output), from output done[0] on; done[0] counts the outputs filled.
-    Returns (status, steps logged) as `advance_exact`, which it calls: DONE once all are filled."""
-    w = work_for(st.y, st.F.shape[0], st.eta.shape[0], cache.nodes.shape[0])
-    k = 0
-    oy, oeta, oetad, oF = out
-    while done[0] < targets.shape[0]:
-        o = done[0]
-        if st.clock[0] >= targets[o] * (1.0 - 1e-12):  # the last step reached it
-            dense_state(st, solid, model, targets[o], oy[o], oeta[o], oetad[o], oF[o])
-            done[0] += 1
-            continue
-        status, k = advance_exact(st, model, ref_pos, solid, cache, cfg, targets[o], kinks, log, k, w)
-        if status != core.DONE:
-            return status, k
     return core.DONE, k
 
 
@@ -976,35 +1042,76 @@ def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
         q.where[o, 1] = idx
 
 
+class StepData(NamedTuple):
+    """A step as dense output reads it: its start (granules y0, modes eta0, eta0', time t0), its
+    force data Fs (nb, nc, 2) with their modal projections qs (nb, nr) and basis Ts (nb, 4), the
+    contacts' motion over it and the friction rate of its RK4 sub-steps."""
+
+    y0: np.ndarray
+    eta0: np.ndarray
+    etad0: np.ndarray
+    t0: float
+    Fs: np.ndarray
+    qs: np.ndarray
+    Ts: np.ndarray
+    motion: Motion
+    rate: float
+
+
+class DenseOut(NamedTuple):
+    """One output's state, filled by `dense`: granules, modes, interface force (nc, 2)."""
+
+    y: np.ndarray
+    eta: np.ndarray
+    etad: np.ndarray
+    F: np.ndarray
+
+
 @njit(cache=True)
-def dense_state(st, solid, model, t_out, yo, eta_o, etad_o, F_o):
-    """The state at t_out inside the last accepted step [t0, t]: the granules by RK4 from the
-    step's start over tau = t_out - t0 under the step's own contact motion (full RK4 accuracy,
-    the step itself unchanged), the modes by their exact response to the step's force polynomial,
-    and the interface force by that polynomial."""
-    t0, t1 = st.clock[1], st.clock[0]
-    h = t1 - t0
-    tau = t_out - t0
-    if h <= 0.0 or tau >= h:
-        yo[:] = st.y
-        eta_o[:] = st.eta
-        etad_o[:] = st.etad
-        F_o[:, :] = st.F
-        return
-    yo[:] = st.y0
+def dense(step, solid, model, tau, out):
+    """The state at tau inside a step: the granules by RK4 from the step's start over tau under the
+    step's contact motion (full RK4 accuracy, the step itself unchanged), the modes by their exact
+    response to the step's force polynomial, and the interface force by that polynomial."""
+    out.y[:] = step.y0
     if tau > 0.0:
-        rk4_substepped(yo, t0, tau, model, st.step_motion, st.clock[3], np.empty((5, yo.shape[0])))
-    nb = st.Ts.shape[0]
+        rk4_substepped(out.y, step.t0, tau, model, step.motion, step.rate, np.empty((5, out.y.shape[0])))
+    nb, nr = step.Ts.shape[0], step.eta0.shape[0]
     H, dH = np.empty(nb), np.empty(nb)
-    basis_values(st.Ts, tau, H, dH)
-    for c in range(st.F.shape[0]):
+    basis_values(step.Ts, tau, H, dH)
+    for c in range(out.F.shape[0]):
         for d in range(2):
             acc = 0.0
             for b in range(nb):
-                acc += H[b] * st.Fs[b, c, d]
-            F_o[c, d] = acc
-    nr = st.eta.shape[0]
+                acc += H[b] * step.Fs[b, c, d]
+            out.F[c, d] = acc
     hom, wd, wv = np.empty((nr, 3)), np.empty((nr, nb)), np.empty((nr, nb))
-    weights_at(solid.omega, tau, st.Ts, hom, wd, wv)
+    weights_at(solid.omega, tau, step.Ts, hom, wd, wv)
     for i in range(nr):
-        eta_o[i], etad_o[i] = propagate_mode(hom, wd, wv, i, st.eta0[i], st.etad0[i], st.qs)
+        out.eta[i], out.etad[i] = propagate_mode(hom, wd, wv, i, step.eta0[i], step.etad0[i], step.qs)
+
+
+@njit(cache=True)
+def trial_step(st, cache, slot, w):
+    """The trial step (before it is accepted) as `dense` reads it."""
+    nb = cache.nodes.shape[0]
+    nc = st.F.shape[0]
+    Fs = np.empty((nb, nc, 2))
+    Fs[0] = st.F
+    for b in range(1, nb):
+        for r in range(2 * nc):
+            Fs[b, r // 2, r % 2] = w.X[(b - 1) * 2 * nc + r]
+    return StepData(st.y, st.eta, st.etad, st.clock[0], Fs, w.qdat, cache.T[slot], w.motion, w.rate[0])
+
+
+@njit(cache=True)
+def dense_state(st, solid, model, t_out, out):
+    """The state at t_out inside the last accepted step [t0, t] (`dense`), or its end."""
+    t0, t1 = st.clock[1], st.clock[0]
+    tau = t_out - t0
+    if t1 - t0 <= 0.0 or tau >= t1 - t0:
+        out.y[:] = st.y
+        out.eta[:] = st.eta
+        out.etad[:] = st.etad
+        out.F[:, :] = st.F
+        return
+    dense(StepData(st.y0, st.eta0, st.etad0, t0, st.Fs, st.qs, st.Ts, st.step_motion, st.clock[3]), solid, model, tau, out)
