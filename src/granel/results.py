@@ -180,8 +180,8 @@ def trajectory_dataset(traj, system, model, attrs: dict, omega=None):
 
 def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
     """The variables of `trajectory_dataset` as a `ResultSpec`."""
-    t = np.asarray(traj.times, float)
-    r = traj.rec
+    t = traj.times
+    r = traj.series
     nt = len(t)
     names = [c.name for c in model.contacts]
     coords = {
@@ -190,16 +190,16 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         "medium": ("granule", np.array([system.media[k] for k in system.medium_index], dtype=object)),
         "contact": ("contact", np.array(names, dtype=object)),
     }
-    pos, vel = np.asarray(r["pos"]), np.asarray(r["vel"])
+    pos, vel = r("pos"), r("vel")
     data = {
         "x": (("time", "granule"), pos[:, :, 0], {"units": "m", "long_name": "centre x"}),
         "y": (("time", "granule"), pos[:, :, 1], {"units": "m", "long_name": "centre y"}),
-        "theta": (("time", "granule"), np.asarray(r["theta"]), {"units": "rad"}),
+        "theta": (("time", "granule"), r("theta"), {"units": "rad"}),
         "v_x": (("time", "granule"), vel[:, :, 0], {"units": "m/s"}),
         "v_y": (("time", "granule"), vel[:, :, 1], {"units": "m/s"}),
-        "omega": (("time", "granule"), np.asarray(r["omega"]), {"units": "rad/s"}),
+        "omega": (("time", "granule"), r("omega"), {"units": "rad/s"}),
     }
-    em = np.asarray(r["energy_media"]).reshape(nt, -1)
+    em = r("energy_media").reshape(nt, -1)
     for k, name in enumerate(system.media):
         data[f"energy_{name.lower()}"] = ("time", em[:, k], {"units": "J", "long_name": f"energy of {name}, eq. (11)"})
     for key, long in (
@@ -211,33 +211,34 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         ("input_work", "work of the applied forces"),
         ("balance_error", "E_solid + E_granular + D - input work, eq. (13)"),
     ):
-        data[key] = ("time", np.asarray(r[key], float), {"units": "J", "long_name": long})
+        data[key] = ("time", r(key).astype(float), {"units": "J", "long_name": long})
     for key, long in (("normal", "normal force on the solid (along n_ik)"), ("tangential", "tangential force on the solid (along t_ik = k x n_ik)")):
-        data[f"contact_force_{key}"] = (("time", "contact"), np.asarray(r[f"force_{key}"], float).reshape(nt, -1), {"units": "N", "long_name": long})
-    data.update(_step_variables(traj.steps, t, len(names)))
+        data[f"contact_force_{key}"] = (("time", "contact"), r(f"force_{key}").astype(float).reshape(nt, -1), {"units": "N", "long_name": long})
+    data.update(_step_variables(traj, t, len(names)))
     if model.ndof:
         data.update(_solid_variables(traj, omega))
     return ResultSpec(data, coords, attrs)
 
 
-def _step_variables(steps: dict, times: np.ndarray, nc: int) -> dict:
+def _step_variables(traj, times: np.ndarray, nc: int) -> dict:
     """Per accepted step (Fig. 11), and per output interval: the smallest step, the mean
     iterations and the largest |lambda| (A9) since the previous output."""
-    st_t = np.asarray(steps["t"], float)
-    dts = np.asarray(steps["h"], float)
-    it = np.asarray(steps["iterations"], np.int64)
-    lam = np.asarray(steps["lam"], np.float32).reshape(len(st_t), nc)
+    st_t = traj.step_series("t")
+    dts = traj.step_series("h")
+    it = traj.step_series("iterations")
+    lam = traj.step_series("lam").reshape(len(st_t), nc)
     # the steps that end in (t_{j-1}, t_j]
     idx = np.searchsorted(st_t, times + 1e-15 * np.maximum(times, 1e-12), side="right")
     step_size = np.full(len(times), np.nan)
     iters = np.full(len(times), np.nan)
     lmax = np.zeros((len(times), nc), np.float32)
-    for j in range(1, len(times)):
-        seg = slice(idx[j - 1], idx[j])
-        if idx[j] > idx[j - 1]:
-            step_size[j] = dts[seg].min()
-            iters[j] = it[seg].mean()
-            lmax[j] = lam[seg].max(axis=0)
+    full = np.flatnonzero(idx[1:] > idx[:-1])  # outputs j = full + 1 have steps in their interval
+    if len(full):
+        starts, end = idx[full], idx[-1]  # consecutive segments: the empty ones between add nothing
+        step_size[full + 1] = np.minimum.reduceat(dts[:end], starts)
+        iters[full + 1] = np.add.reduceat(it[:end], starts) / np.diff(np.append(starts, end))
+        if nc:
+            lmax[full + 1] = np.maximum.reduceat(lam[:end], starts, axis=0)
     return {
         "step_size": (("time",), step_size, {"units": "s", "long_name": "smallest step since the previous output"}),
         "iterations": (("time",), iters, {"long_name": "mean interface iterations since the previous output"}),
@@ -250,18 +251,18 @@ def _step_variables(steps: dict, times: np.ndarray, nc: int) -> dict:
 
 
 def _solid_variables(traj, omega) -> dict:
-    ts = np.asarray(traj.solid_times, float)
+    ts = traj.solid_times
     nst = len(ts)
     out = {"solid_time": (("solid_time",), ts, {"units": "s"})}
-    if "eta" in traj.solid:  # mass-normalised modal coordinates: q = Phi eta
-        out["solid_eta"] = (("solid_time", "mode"), np.asarray(traj.solid["eta"], np.float32).reshape(nst, -1),
+    if "eta" in traj.solid_names:  # mass-normalised modal coordinates: q = Phi eta
+        out["solid_eta"] = (("solid_time", "mode"), traj.solid_series("eta").astype(np.float32, copy=False).reshape(nst, -1),
                             {"long_name": "modal displacements (mass-normalised modes)"})
-        out["solid_eta_dot"] = (("solid_time", "mode"), np.asarray(traj.solid["eta_dot"], np.float32).reshape(nst, -1),
+        out["solid_eta_dot"] = (("solid_time", "mode"), traj.solid_series("eta_dot").astype(np.float32, copy=False).reshape(nst, -1),
                                 {"long_name": "modal velocities"})
         out["mode_omega"] = (("mode",), np.asarray(omega, float), {"units": "rad/s"})
     else:  # reduced nodal coordinates (solids too large for all modes)
-        out["solid_x"] = (("solid_time", "dof"), np.asarray(traj.solid["q"], np.float32).reshape(nst, -1),
+        out["solid_x"] = (("solid_time", "dof"), traj.solid_series("q").astype(np.float32, copy=False).reshape(nst, -1),
                           {"long_name": "reduced solid displacements q"})
-        out["solid_v"] = (("solid_time", "dof"), np.asarray(traj.solid["v"], np.float32).reshape(nst, -1),
+        out["solid_v"] = (("solid_time", "dof"), traj.solid_series("v").astype(np.float32, copy=False).reshape(nst, -1),
                           {"long_name": "reduced solid velocities"})
     return out

@@ -122,8 +122,8 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     fp = fingerprint(problem.source + problem.settings.method)
     traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
     solid = problem.solid
-    steps = np.asarray(traj.steps["h"], float)
-    its = np.asarray(traj.steps["iterations"], float)
+    steps = traj.step_series("h")
+    its = traj.step_series("iterations").astype(float)
     info = {**traj.solver, "steps": int(len(steps)), "min_step": float(steps.min()) if len(steps) else problem.settings.dt,
             "mean_iterations": float(its.mean()) if len(its) else 0.0, "max_iterations_used": int(its.max()) if len(its) else 0}
     attrs = base_attrs(problem.source, info)

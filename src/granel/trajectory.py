@@ -1,7 +1,10 @@
 """A run's record, whatever solver produced it: per output, the granules and the energies of
 eqs. (11)-(13) and the interface forces; at the solid's outputs, its state in mass-normalised
 modal coordinates (or, for a solid too large for all modes, reduced nodal coordinates); per
-accepted step, its size, iterations and friction eigenvalues (A9)."""
+accepted step, its size, iterations and friction eigenvalues (A9).
+
+Records arrive one output at a time (`record`) or in blocks of outputs (`record_block`: arrays
+whose first axis is the output); they are kept as blocks and joined once (`series`)."""
 
 from __future__ import annotations
 
@@ -13,56 +16,100 @@ import numpy as np
 GRANULAR = ("pos", "theta", "vel", "omega", "energy_media", "energy_solid", "energy_solid_kinetic", "energy_solid_potential",
             "dissipated_viscous", "dissipated_friction", "input_work", "balance_error", "force_normal", "force_tangential")
 STEPS = ("t", "h", "iterations", "lam")
+STEP_TYPES = {"t": float, "h": float, "iterations": np.int64, "lam": np.float32}
+
+
+def _join(blocks: list, dtype=None) -> np.ndarray:
+    if not blocks:
+        return np.zeros(0, dtype or float)
+    return np.concatenate(blocks).astype(dtype, copy=False) if dtype else np.concatenate(blocks)
 
 
 @dataclass
 class Trajectory:
-    times: list = field(default_factory=list)
-    rec: dict = field(default_factory=lambda: defaultdict(list))
-    solid_times: list = field(default_factory=list)
-    solid: dict = field(default_factory=lambda: defaultdict(list))  # eta, eta_dot | q, v
-    steps: dict = field(default_factory=lambda: {k: [] for k in STEPS})
+    _times: list = field(default_factory=list)  # blocks of output times
+    _rec: dict = field(default_factory=lambda: defaultdict(list))  # name -> blocks (outputs, ...)
+    _solid_times: list = field(default_factory=list)
+    _solid: dict = field(default_factory=lambda: defaultdict(list))  # eta, eta_dot | q, v
+    _steps: dict = field(default_factory=lambda: {k: [] for k in STEPS})
     solver: dict = field(default_factory=dict)  # settings and counters, for the result's attributes
     watch: object = None  # called with the latest step time whenever a solver logs steps (progress, wall limit)
 
     def record(self, t: float, obs: dict) -> None:
-        self.times.append(float(t))
+        self.record_block(np.array([float(t)]), {k: np.asarray(v)[None] for k, v in obs.items()})
+
+    def record_block(self, times, obs: dict) -> None:
+        """Outputs at `times` (K,), each entry of `obs` an array whose first axis has length K."""
+        self._times.append(np.asarray(times, float))
         for k, v in obs.items():
-            self.rec[k].append(v)
+            self._rec[k].append(np.asarray(v))
 
     def record_solid(self, t: float, snap: dict) -> None:
-        self.solid_times.append(float(t))
+        self.record_solid_block(np.array([float(t)]), {k: np.asarray(v)[None] for k, v in snap.items()})
+
+    def record_solid_block(self, times, snap: dict) -> None:
+        self._solid_times.append(np.asarray(times, float))
         for k, v in snap.items():
-            self.solid[k].append(v)
+            self._solid[k].append(np.asarray(v))
 
     def log_steps(self, t, h, iterations, lam) -> None:
-        self.steps["t"].extend(np.asarray(t, float).tolist())
-        self.steps["h"].extend(np.asarray(h, float).tolist())
-        self.steps["iterations"].extend(np.asarray(iterations, np.int64).tolist())
-        self.steps["lam"].extend(np.asarray(lam, np.float32))
+        for key, v in zip(STEPS, (t, h, iterations, lam)):
+            self._steps[key].append(np.array(v, STEP_TYPES[key]))
         if self.watch is not None and len(t):
             self.watch(float(t[-1]))
 
+    # ------------------------------------------------------------ reading
+    @property
+    def times(self) -> np.ndarray:
+        return _join(self._times, float)
+
+    @property
+    def solid_times(self) -> np.ndarray:
+        return _join(self._solid_times, float)
+
+    @property
+    def names(self) -> list:
+        return list(self._rec)
+
+    @property
+    def solid_names(self) -> list:
+        return list(self._solid)
+
+    def series(self, name: str) -> np.ndarray:
+        """Output quantity `name`, outputs along the first axis."""
+        return _join(self._rec[name])
+
+    def solid_series(self, name: str) -> np.ndarray:
+        return _join(self._solid[name])
+
+    def first(self, name: str):
+        """The value of `name` at the first output."""
+        return self._rec[name][0][0]
+
+    def step_series(self, name: str) -> np.ndarray:
+        """Per accepted step: t, h, iterations or lam (steps, contacts)."""
+        return _join(self._steps[name], STEP_TYPES[name])
+
     # checkpoints: everything as flat named arrays
     def pack(self) -> dict:
-        out = {f"rec:{k}": np.asarray(v) for k, v in self.rec.items()}
-        out.update({f"solid:{k}": np.asarray(v) for k, v in self.solid.items()})
-        out.update({f"step:{k}": np.asarray(v) for k, v in self.steps.items()})
-        out["times"] = np.asarray(self.times, float)
-        out["solid_times"] = np.asarray(self.solid_times, float)
+        out = {f"rec:{k}": self.series(k) for k in self._rec}
+        out.update({f"solid:{k}": self.solid_series(k) for k in self._solid})
+        out.update({f"step:{k}": self.step_series(k) for k in STEPS})
+        out["times"] = self.times
+        out["solid_times"] = self.solid_times
         return out
 
     @classmethod
     def unpack(cls, arrays: dict) -> "Trajectory":
         tr = cls()
-        tr.times = list(arrays["times"])
-        tr.solid_times = list(arrays["solid_times"])
+        tr._times = [np.asarray(arrays["times"], float)]
+        tr._solid_times = [np.asarray(arrays["solid_times"], float)]
         for key, v in arrays.items():
             kind, _, name = key.partition(":")
             if kind == "rec":
-                tr.rec[name] = list(v)
+                tr._rec[name] = [np.asarray(v)]
             elif kind == "solid":
-                tr.solid[name] = list(v)
+                tr._solid[name] = [np.asarray(v)]
             elif kind == "step":
-                tr.steps[name] = list(v)
+                tr._steps[name] = [np.asarray(v, STEP_TYPES[name])]
         return tr

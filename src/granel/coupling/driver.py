@@ -2,7 +2,10 @@
 
 A solver (`coupling.solver.ModalSolver`, `coupling.sparse.SparseSolver`) offers `start()`,
 `advance(k, trajectory)` to output k, `observe()`, `solid_snapshot()`, `save()`/`load(arrays)`
-and `attributes()`; the driver never sees the physics inside.
+and `attributes()`; one that computes its outputs in blocks (`coupling.solver.ExactSolver`) also
+offers `advance_block(k, trajectory)`, which returns the outputs from k on that it reached as
+arrays (first axis: the output), and `solid_block(rows)`. The driver never sees the physics
+inside.
 """
 
 from __future__ import annotations
@@ -82,6 +85,24 @@ def _guarded(obs: dict, ledger0: float, energy0: float, guards: Guards, t: float
     return obs
 
 
+def _guarded_block(obs: dict, ledger0: float, energy0: float, guards: Guards, times) -> dict:
+    """`_guarded` for a block of outputs (arrays whose first axis is the output): the first
+    output that breaks a rule stops the run with its own time and message."""
+    obs = dict(obs)
+    ratio, where = obs.pop("overlap_ratio"), obs.pop("overlap_at")
+    obs["balance_error"] = obs["balance_error"] - ledger0
+    finite = np.isfinite(obs["pos"]).reshape(len(times), -1).all(axis=1) & np.isfinite(obs["vel"]).reshape(len(times), -1).all(axis=1)
+    scale = np.maximum(np.abs(obs["input_work"]), energy0)
+    lost = (scale > 0) & (np.abs(obs["balance_error"]) > guards.balance_limit * scale)
+    bad = ~finite | lost | (ratio > guards.overlap_limit)
+    if bad.any():
+        i = int(np.argmax(bad))
+        one = {k: v[i] for k, v in obs.items()}
+        one.update(balance_error=one["balance_error"] + ledger0, overlap_ratio=float(ratio[i]), overlap_at=where[i])
+        _guarded(one, ledger0, energy0, guards, float(times[i]))  # raises with the output's own message
+    return obs
+
+
 def _initial(obs: dict) -> tuple[float, float]:
     """From the first output: the ledger E + D - W (eq. 13) and the energy E the run starts with."""
     energy = float(np.sum(obs["energy_media"]) + obs["energy_solid"])
@@ -120,7 +141,7 @@ def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=Non
         traj = Trajectory.unpack(recorded)
         start = int(arrays["k"])
         # the recorded balance starts at zero: rebuild the initial ledger from the first output
-        ledger0, energy0 = _initial({k: v[0] for k, v in traj.rec.items()})
+        ledger0, energy0 = _initial({k: traj.first(k) for k in traj.names})
     else:
         solver.start()
         traj = Trajectory()
@@ -132,14 +153,30 @@ def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=Non
     every = schedule.checkpoint_period() if checkpoint else 0
     t_wall = time.perf_counter()
     traj.watch = _watcher(progress, max_wall, t_start)
-    for k in range(start, schedule.outputs):
-        solver.advance(k + 1, traj)
-        traj.watch(solver.t)
-        traj.record(solver.t, _guarded(solver.observe(), ledger0, energy0, guards, solver.t))
-        if (k + 1) % schedule.solid_every == 0:
-            traj.record_solid(solver.t, solver.solid_snapshot())
-        if every and (k + 1) % every == 0 and k + 1 < schedule.outputs:
-            save_checkpoint(checkpoint, fingerprint, {**solver.save(), "k": k + 1}, traj.pack(), traj.times)
+    block = getattr(solver, "advance_block", None)
+    k = start
+    while k < schedule.outputs:
+        if block is None:
+            solver.advance(k + 1, traj)
+            traj.watch(solver.t)
+            traj.record(solver.t, _guarded(solver.observe(), ledger0, energy0, guards, solver.t))
+            if (k + 1) % schedule.solid_every == 0:
+                traj.record_solid(solver.t, solver.solid_snapshot())
+            k += 1
+        else:  # outputs k + 1 .. k + m, ending at a checkpoint's output; the error of an output beyond
+            times, obs, error = block(k + 1, traj)
+            m = len(times)
+            if m:
+                traj.watch(float(times[-1]))
+                traj.record_block(times, _guarded_block(obs, ledger0, energy0, guards, times))
+                rows = np.flatnonzero(np.arange(k + 1, k + m + 1) % schedule.solid_every == 0)
+                if len(rows):
+                    traj.record_solid_block(times[rows], solver.solid_block(rows))
+            k += m
+            if error is not None:
+                raise error
+        if every and k % every == 0 and k < schedule.outputs:
+            save_checkpoint(checkpoint, fingerprint, {**solver.save(), "k": k}, traj.pack(), traj.times)
     traj.solver = {**solver.attributes(), "wall_time_s": time.perf_counter() - t_wall}
     traj.watch = None
     return traj

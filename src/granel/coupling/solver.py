@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.linalg import splu
 
-from ..granular.bundles import Motion
+from ..granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK, Motion
 from ..granular.kernels import rhs
 from ..granular.system import GranularSystem, GranularState, Stepper, contact_label
 from ..solid.base import SolidModel
@@ -199,6 +199,19 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
             "overlap_ratio": ratio, "overlap_at": where}
 
 
+class _Labels:
+    """Labels of a block's outputs, made only when one is read (a guard's message)."""
+
+    def __init__(self, label, n):
+        self._label, self._n = label, n
+
+    def __getitem__(self, i):
+        return self._label(i)
+
+    def __len__(self):
+        return self._n
+
+
 class ExactSolver:
     """The fast method with the exact modal integrator (`coupling.exact`): the eigenmodes below
     `mode_cutoff` and the residual modes of the dropped ones (their static compliance at the
@@ -369,37 +382,67 @@ class ExactSolver:
         i = self._current()
         return tuple(a[i] for a in self._batch["out"])
 
-    def observe(self) -> dict:
-        i = self._current()
+    def advance_block(self, k: int, trajectory):
+        """Outputs from k on, as many as one compiled batch reaches (it ends at a checkpoint's
+        output): (times, observations as arrays whose first axis is the output, the error that
+        stopped the batch or None)."""
+        self._run_batch(k, trajectory)
         b = self._batch
-        y, F, q = b["out"][0][i], b["out"][3][i], b["q"]
-        g = GranularState(y, self.t_out)
-        ek, ep = float(q.solid[i, 0]), float(q.solid[i, 1])
-        em = q.media[i].copy()
-        dv, df, w = g.dissipated_viscous, g.dissipated_friction, g.input_work
-        return {"pos": g.pos.copy(), "theta": g.theta.copy(), "vel": g.vel.copy(), "omega": g.omega.copy(), "energy_media": em,
-                "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
-                "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
-                "force_normal": np.einsum("ij,ij->i", F, self.normals),
-                "force_tangential": np.einsum("ij,ij->i", F, self.solid.frame.tangent),
-                "overlap_ratio": float(q.overlap[i]),
-                "overlap_at": contact_label(self.system, b["model"], int(q.where[i, 0]), int(q.where[i, 1]))}
+        n = b["done"]
+        if n:
+            self._k, self.t_out = k + n - 1, self._target(k + n - 1)
+        times = np.array([self._target(j) for j in range(k, k + n)])
+        return times, self._observe_rows(np.arange(n)), b["error"]
+
+    def solid_block(self, rows) -> dict:
+        """`solid_snapshot` at the rows of the last block."""
+        _, eta, etad, _ = self._batch["out"]
+        return self._snapshots(eta[rows], etad[rows])
+
+    def observe(self) -> dict:
+        rows = self._observe_rows(np.array([self._current()]))
+        return {k: v[0] for k, v in rows.items()}
+
+    def _observe_rows(self, rows) -> dict:
+        """The observations at the given outputs of the current batch (arrays, first axis the row)."""
+        b = self._batch
+        Y, F, q = b["out"][0][rows], b["out"][3][rows], b["q"]
+        n = self.system.n
+        ek, ep = q.solid[rows, 0], q.solid[rows, 1]
+        em = q.media[rows]
+        dv, df, w = Y[:, 6 * n + ACC_VISC], Y[:, 6 * n + ACC_FRIC], Y[:, 6 * n + ACC_WORK]
+        where, model = q.where[rows], b["model"]
+        return {"pos": Y[:, : 2 * n].reshape(-1, n, 2), "theta": Y[:, 2 * n : 3 * n], "vel": Y[:, 3 * n : 5 * n].reshape(-1, n, 2),
+                "omega": Y[:, 5 * n : 6 * n], "energy_media": em, "energy_solid": ek + ep, "energy_solid_kinetic": ek,
+                "energy_solid_potential": ep, "dissipated_viscous": dv, "dissipated_friction": df, "input_work": w,
+                "balance_error": ek + ep + em.sum(axis=1) + dv + df - w,
+                "force_normal": np.einsum("kij,ij->ki", F, self.normals),
+                "force_tangential": np.einsum("kij,ij->ki", F, self.solid.frame.tangent),
+                "overlap_ratio": q.overlap[rows],
+                "overlap_at": _Labels(lambda i: contact_label(self.system, model, int(where[i, 0]), int(where[i, 1])), len(rows))}
 
     def solid_snapshot(self) -> dict:
-        """All eigenmodes: the retained ones' state, and the residual modes' state projected on the
-        dropped eigenmodes (their shapes lie in the dropped modes' span: eta_d = W_d^-2 P_d' Z q),
-        so that the modal energies add up to the solid's energy."""
-        _, eta, etad, F = self._dense()
+        _, eta, etad, _ = self._dense()
+        return {k: v[0] for k, v in self._snapshots(eta[None], etad[None]).items()}
+
+    def _snapshots(self, eta, etad) -> dict:
+        """All eigenmodes at a block of outputs (rows of eta, eta'): the retained ones' state, and
+        the residual modes' state projected on the dropped eigenmodes (their shapes lie in the
+        dropped modes' span: eta_d = W_d^-2 P_d' Z q), so that the modal energies add up to the
+        solid's energy; or, for a large solid, its reduced nodal state."""
         nk = self.kept
         if self.nodal is not None:
             Phi, PsiZ = self.nodal
-            return {"q": (Phi @ eta[:nk] + PsiZ @ eta[nk:]).astype(np.float32),
-                    "v": (Phi @ etad[:nk] + PsiZ @ etad[nk:]).astype(np.float32)}
-        Z = self.residual_Z
-        d = (Z @ eta[nk:]) @ self.P_drop / self.omega_drop**2
-        dd = (Z @ etad[nk:]) @ self.P_drop / self.omega_drop**2
-        return {"eta": np.concatenate([eta[:nk], d]).astype(np.float32),
-                "eta_dot": np.concatenate([etad[:nk], dd]).astype(np.float32)}
+            return {"q": (eta[:, :nk] @ Phi.T + eta[:, nk:] @ PsiZ.T).astype(np.float32),
+                    "v": (etad[:, :nk] @ Phi.T + etad[:, nk:] @ PsiZ.T).astype(np.float32)}
+        proj = self.residual_Z.T @ self.P_drop / self.omega_drop**2  # residual -> dropped modes
+        out = {}
+        for key, x in (("eta", eta), ("eta_dot", etad)):
+            full = np.empty((len(x), nk + len(self.omega_drop)), np.float32)
+            full[:, :nk] = x[:, :nk]
+            full[:, nk:] = x[:, nk:] @ proj
+            out[key] = full
+        return out
 
     def attributes(self) -> dict:
         s = self.settings
