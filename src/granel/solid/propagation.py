@@ -8,8 +8,9 @@ g(tau) = sum_k g_k tau^k / k! (k = 0..3), the solution is, with x = w h,
 
 where S_p(x) = sum_m (-x^2)^m / (2m + p)! (S0 = cos x, S1 = sin x / x): the convolution of the
 oscillator's impulse response sin(w (h - tau)) / w with tau^k / k! is h^(k+2) S_(k+2)(x).
-`oscillator_functions` evaluates S0..S5 to full precision for x from 0 to beyond 1e3: by the
-series below x = 2 (no cancellation), by the recurrence S_(p+2) = (1/p! - S_p) / x^2 above (each step divides the
+`oscillator_functions` evaluates S0..S5 to full precision for x from 0 to beyond 1e3: below
+x = 2, S4 and S5 by their series and the others down from them, S_p = 1/p! - x^2 S_(p+2) (no
+cancellation there); above, by the recurrence S_(p+2) = (1/p! - S_p) / x^2 (each step divides the
 error by x^2 >= 4), with S2 = 2 sin^2(x/2) / x^2.
 
 Over a step the interface force is a polynomial of degree <= 3 in a basis H_b(tau), given by its
@@ -29,22 +30,35 @@ from numba import njit
 SERIES_LIMIT = 2.0
 
 
+def _series_coefficients(p: int, terms: int) -> np.ndarray:
+    """(-1)^m / (2m + p)!, m = 0 .. terms - 1: S_p as a polynomial in x^2."""
+    return np.array([(-1.0) ** m / math.factorial(2 * m + p) for m in range(terms)])
+
+
+# below SERIES_LIMIT, 13 terms of S4 and S5 reach round-off: (x^2)^13 / 30! < 1e-24 for x < 2
+_S4 = _series_coefficients(4, 13)
+_S5 = _series_coefficients(5, 13)
+
+
 @njit(cache=True)
 def oscillator_functions(x, S):
     """S[p] = S_p(x) = sum_m (-x^2)^m / (2m + p)!, p = 0..5, for x >= 0."""
     x2 = x * x
     if x < SERIES_LIMIT:
-        for p in range(6):
-            term = 1.0
-            for q in range(2, p + 1):
-                term /= q
-            total = term
-            m = 0
-            while abs(term) > 1e-18 * abs(total):
-                m += 1
-                term *= -x2 / ((2 * m + p - 1) * (2 * m + p))
-                total += term
-            S[p] = total
+        # S4, S5 by their series in x^2 (Horner), then down: S_p = 1/p! - x^2 S_(p+2), which
+        # loses nothing here (x^2 S_(p+2) < 0.7 / p! for p >= 1); S0 = cos x directly (near
+        # pi / 2 it is the difference of two numbers close to 1)
+        s4 = _S4[12]
+        s5 = _S5[12]
+        for m in range(11, -1, -1):
+            s4 = s4 * x2 + _S4[m]
+            s5 = s5 * x2 + _S5[m]
+        S[5] = s5
+        S[4] = s4
+        S[3] = 1.0 / 6.0 - x2 * s5
+        S[2] = 0.5 - x2 * s4
+        S[1] = 1.0 - x2 * S[3]
+        S[0] = math.cos(x)
         return
     S[0] = math.cos(x)
     S[1] = math.sin(x) / x
