@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from granel import scenario as S
 from granel.coupling import core
 from granel.coupling.driver import drive
-from granel.granular.contact import contact_law, contact_law_derivatives, friction_eigenvalue, hertz_potential
+from granel.granular.contact import contact_law, contact_law_derivatives, friction_eigenvalue, hertz_potential, tanh
 from granel.run import make_solver, run_scenario
 
 A, G, MU, KS = 4 / 3 * 219.8e9 * math.sqrt(0.005), 6.313e-3 * math.sqrt(0.004 * 1.6e10), 0.099, 100.0
@@ -35,6 +35,23 @@ def _pot(A, d):
 @njit
 def _lam(mu, k_s, normal, vt, h, ct):
     return friction_eigenvalue(mu, k_s, normal, vt, h, ct)
+
+
+@njit
+def _tanh(x):
+    out = np.empty_like(x)
+    for i in range(x.shape[0]):
+        out[i] = tanh(x[i])
+    return out
+
+
+def test_friction_tanh_within_two_ulp():
+    """The friction law's tanh (eq. 5) against numpy's over the whole range, subnormal arguments
+    to saturation, within 2 ulp; exactly +-1 beyond 19.1."""
+    x = np.concatenate([np.linspace(-40, 40, 400001), np.logspace(-310, 1.6, 200000), -np.logspace(-310, 1.6, 200000), [0.0]])
+    got, ref = _tanh(x), np.tanh(x)
+    assert np.all(np.abs(got - ref) <= 2 * np.spacing(np.abs(ref)))
+    assert np.all(got[np.abs(x) > 19.1] == np.sign(x[np.abs(x) > 19.1]))
 
 
 @pytest.mark.parametrize("delta, ddelta, vt", [(1e-6, 0.3, 0.004), (3e-7, -0.2, -0.02), (2e-6, 0.0, 1e-4), (5e-8, 1.5, 0.5)])

@@ -54,6 +54,10 @@ from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
 GRID_PER_OCTAVE = 4
+# Newton's matrix serves later steps (a chord across steps) while their grid level is within
+# REUSE_LEVELS of the one it was built at and the iteration contracts by REUSE_RATE or better
+REUSE_LEVELS = 2
+REUSE_RATE = 0.2
 # the energy-ledger control (`step_error`, `control_error`): a step's defect of the ledger (13) is
 # accepted up to LEDGER_ACCEPT times its share (`ledger_share`), and the running mean square of
 # defect / share (each clipped at LEDGER_CLIP, filter weight LEDGER_FILTER) aims at LEDGER_RMS^2
@@ -327,9 +331,8 @@ def _motion_at_nodes(st, cache, slot, h, w):
             for b in range(1, nb):
                 for q in range(m2):
                     x = X[(b - 1) * m2 + q]
-                    if x != 0.0:
-                        u += Cu[b, r, q] * x
-                        v += Cw[b, r, q] * x
+                    u += Cu[b, r, q] * x
+                    v += Cw[b, r, q] * x
             w.un[j, r] = u
             w.wn[j, r] = v
     e = nn - 1
@@ -705,6 +708,7 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
                 w.X[r] = 0.5 * (w.X[r] + w.Xprev[r])
             continue
         backtracks = 0
+        rate = worst / last if it > 1 else 0.0
         last = worst
         if ok or not cfg.newton:
             w.X[:] = w.G
@@ -712,10 +716,12 @@ def interface_solve(st, t, h, model, solid, cache, slot, cfg, w):
                 w.mslot[1] = it
                 return core.CONVERGED, it
             continue
-        # the matrix of the step's first iterate serves the later ones (a chord Newton: as few
-        # iterations as a fresh matrix each time, measured), unless a contact opened or closed
+        # a chord Newton: the matrix serves the step's later iterates (as few iterations as a
+        # fresh matrix each time, measured) and the next steps near its size while it contracts
+        # well, unless a contact opened or closed
         changed = _touching(w, nc, nn)
-        if changed or (it == 1 and (w.mslot[0] != slot or w.mslot[1] > 3)) or (it > 1 and w.mslot[2] == 0):
+        stale = abs(w.mslot[0] - slot) > REUSE_LEVELS or slot == cache.ready.shape[0] - 1 or w.mslot[0] < 0
+        if changed or (it == 1 and stale) or (it > 1 and w.mslot[2] == 0 and rate > REUSE_RATE):
             if not _newton_matrix(w, cache, slot, solid.frame):
                 return core.NO_CONVERGENCE, it
             w.mslot[0] = slot

@@ -24,10 +24,30 @@ def hertz_tsuji_normal(A, G, delta, ddelta):
     return A * delta * math.sqrt(delta) + gam * ddelta, gam
 
 
+# beyond this, tanh is 1 to the last bit (1 - tanh x = 2 e^(-2x) / (1 + e^(-2x)) < 2^-54)
+TANH_SATURATED = 19.1
+
+
+@njit(cache=True, inline="always")
+def tanh(x):
+    """tanh x within 2 ulp (tested against numpy), at about half the cost of the library's: the
+    friction law evaluates it at every contact and RK4 stage. +-1 beyond TANH_SATURATED (most
+    sliding contacts: k_s |v_t| > 19.1); expm1(2x) / (expm1(2x) + 2) for |x| < 1/2 (no
+    cancellation near 0); 1 - 2 / (e^(2|x|) + 1) with the sign of x between."""
+    ax = abs(x)
+    if ax > TANH_SATURATED:
+        return 1.0 if x > 0.0 else -1.0
+    if ax < 0.5:
+        e = math.expm1(2.0 * x)
+        return e / (e + 2.0)
+    t = 1.0 - 2.0 / (math.exp(2.0 * ax) + 1.0)
+    return t if x > 0.0 else -t
+
+
 @njit(cache=True, inline="always")
 def tanh_friction(fn, vt, mu, k_s):
     """Eq. (5): ft = -mu |N| tanh(k_s vt)."""
-    return -mu * abs(fn) * math.tanh(k_s * vt)
+    return -mu * abs(fn) * tanh(k_s * vt)
 
 
 @njit(cache=True, inline="always")
@@ -53,7 +73,7 @@ def contact_law_derivatives(A, G, delta, ddelta, vt, mu, k_s):
     dfn_d = 1.5 * A * math.sqrt(delta) + 0.25 * G * ddelta / (q * q * q)
     dfn_dd = G * q
     fn = A * delta * math.sqrt(delta) + G * q * ddelta
-    th = math.tanh(k_s * vt)
+    th = tanh(k_s * vt)
     s = -mu * th * (1.0 if fn >= 0.0 else -1.0)  # d ft / d fn
     return dfn_d, dfn_dd, s * dfn_d, s * dfn_dd, -mu * abs(fn) * k_s * (1.0 - th * th)
 
@@ -64,7 +84,7 @@ def friction_map_slope(mu, k_s, normal, vt, beta):
     cosh^2(k_s vt) (eq. 5 differentiated), where beta is the relative tangential velocity's
     response to the contact's own tangential force: the map F_t -> F_t is a contraction where
     this is below 1."""
-    th = math.tanh(k_s * vt)
+    th = tanh(k_s * vt)
     return mu * k_s * abs(normal) * beta * (1.0 - th * th)
 
 
