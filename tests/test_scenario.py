@@ -3,6 +3,7 @@
 import copy
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
 
@@ -193,3 +194,18 @@ def _fields_of(section):
     model = {"simulation": S.SimulationSpec, "contact": S.ContactSpec, "solid": S.SolidSpec,
              "media.0": S.MediumSpec, "excitations.0": S.ExcitationSpec}[section]
     return model.model_fields
+
+
+@pytest.mark.parametrize("n", [1, 2, 300, 2500])
+def test_close_pairs_match_a_kd_tree(n):
+    """The neighbour search (direct below DIRECT_PAIRS granules, a k-d tree above) finds exactly
+    the pairs scipy's k-d tree finds, on random points with a cut-off of a few spacings."""
+    from scipy.spatial import cKDTree
+
+    from granel.granular.system import close_pairs
+
+    pos = np.random.default_rng(n).uniform(0, 1, size=(n, 2))
+    cutoff = 3.0 / np.sqrt(n)
+    got = {tuple(p) for p in close_pairs(pos, cutoff)}
+    want = {tuple(p) for p in cKDTree(pos).query_pairs(cutoff)}
+    assert got == want and all(i < j for i, j in got)

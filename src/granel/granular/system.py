@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..excitation import KIND_CODES, LoadHistory
 from ..materials import (
@@ -230,16 +229,32 @@ class NeighbourList:
     walls: Walls
 
 
+# below this many granules, all pairs are compared directly (n^2 / 2 distances, a few MB at most);
+# above, a k-d tree finds them (importing scipy.spatial costs about 0.3 s, half of a short run)
+DIRECT_PAIRS = 2000
+
+
+def close_pairs(pos: np.ndarray, cutoff: float) -> np.ndarray:
+    """The pairs (i < j) of points closer than `cutoff`, as an (m, 2) integer array."""
+    n = len(pos)
+    if n < 2:
+        return np.zeros((0, 2), np.int64)
+    if n > DIRECT_PAIRS:
+        from scipy.spatial import cKDTree
+
+        return cKDTree(pos).query_pairs(cutoff, output_type="ndarray").astype(np.int64)
+    i, j = np.triu_indices(n, 1)
+    close = np.hypot(*(pos[j] - pos[i]).T) <= cutoff
+    return np.stack([i[close], j[close]], axis=1).astype(np.int64)
+
+
 def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     """Pairs whose surfaces are closer than the skin (KD-tree), and granule-wall candidates."""
     n = system.n
     R = system.radius
     skin = system.skin
     law = system.law
-    if n > 1:
-        pairs = cKDTree(pos).query_pairs(2.0 * R.max() + skin, output_type="ndarray")
-    else:
-        pairs = np.zeros((0, 2), dtype=np.int64)
+    pairs = close_pairs(pos, 2.0 * R.max() + skin)
     if len(pairs):
         i, j = pairs[:, 0], pairs[:, 1]
         d = np.hypot(*(pos[j] - pos[i]).T)

@@ -8,12 +8,11 @@ import math
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
 from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
-from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
+from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, close_pairs, initial_state
 from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
@@ -159,7 +158,7 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     # overlapping granules
     pos, R = system.pos0, system.radius
     if system.n > 1:
-        pairs = cKDTree(pos).query_pairs(2 * R.max(), output_type="ndarray")
+        pairs = close_pairs(pos, 2 * R.max())
         if len(pairs):
             i, j = pairs[:, 0], pairs[:, 1]
             over = R[i] + R[j] - np.hypot(*(pos[j] - pos[i]).T)
