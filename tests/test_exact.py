@@ -191,3 +191,13 @@ def test_twelve_paper_cases_at_default_tolerances(solid, exc, shock):
     assert dev < 1e-3 and v_exc < 1e-3 and v_far < 1e-3, (dev, v_exc, v_far)
     w = ds["input_work"].values.max()
     assert np.abs(ds["balance_error"].values).max() < 1e-6 * w
+
+
+def test_fixed_steps_run_past_the_ledger_bound():
+    """Fixed steps never consult the ledger control; once the drift passes its bound the shares
+    vanish and the run must still finish (a fixed 200 ns step stopped with a ZeroDivisionError)."""
+    ds = run_scenario(S.load("paper", BEAM_SSGM + ['simulation.duration="0.02ms"', 'simulation.dt="200ns"',
+                                                   "simulation.adaptive=false", "simulation.ledger_tol=1e-15"]))
+    assert ds.attrs["solver_steps"] == 100
+    w = ds["input_work"].values.max()
+    assert 1e-15 * w < np.abs(ds["balance_error"].values).max() < 1e-6 * w
