@@ -428,7 +428,7 @@ def bench(
     json_out: bool = typer.Option(False, "--json", help="print one JSON object"),
     cases: Optional[str] = typer.Option(None, help="comma list of case tags, e.g. plate-SSGMC-strong"),
     duration: Optional[str] = typer.Option(None, help="simulated time per case (default 0.8 ms, 0.1 ms with --quick)"),
-    reference: bool = typer.Option(False, "--reference", help="also each method's errors against Newmark at 5 ns "
+    reference: bool = typer.Option(False, "--reference", help="also each method's errors against Newmark at 2.5 ns "
                                    "on the strong SSGM-side plate case (when it is among the cases)"),
     fresh: bool = typer.Option(True, "--fresh/--no-fresh", help="time `granel run` in fresh processes"),
 ):
