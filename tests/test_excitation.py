@@ -93,3 +93,81 @@ def test_burst_impulse_for_any_cycle_count(amplitude, cycles):
     s = np.append(np.linspace(0, cycles / f, 41), min(cycles, 0.5) / f)
     running = np.array([quad(b, 0, x, limit=200)[0] for x in s])
     assert b.peak_impulse() == pytest.approx(np.abs(running).max(), rel=1e-9)
+
+
+def test_harmonic_drive_ramps_up_smoothly_and_stops():
+    """A harmonic drive: zero before t0 and after its duration; within the ramps (up at the start,
+    down at the end) the amplitude is (1 - cos(pi s / T_r)) / 2 of the full one; force and slope
+    continuous at the ramps' ends."""
+    from granel.excitation import harmonic
+
+    A, f, t0, ph, nr = 3.0, 2e4, 1e-5, 0.4, 2.0
+    h = harmonic(A, f, t0=t0, duration=1e-3, phase=ph, ramp_cycles=nr)
+    Tr = nr / f
+    assert h(t0 - 1e-9) == 0.0 and h(t0 + 1e-3 + 1e-9) == 0.0
+    s = 0.3 * Tr
+    assert h(t0 + s) == pytest.approx(A * 0.5 * (1 - math.cos(math.pi * 0.3)) * math.sin(2 * math.pi * f * s + ph), rel=1e-13)
+    s = 5.3 / f
+    assert h(t0 + s) == pytest.approx(A * math.sin(2 * math.pi * f * s + ph), rel=1e-13)
+    eps = 1e-12
+    assert abs(h(t0 + eps)) < 1e-9  # starts from zero force ...
+    slope = lambda t: (h(t + 1e-10) - h(t - 1e-10)) / 2e-10  # noqa: E731
+    assert slope(t0 + Tr - 1e-9) == pytest.approx(slope(t0 + Tr + 1e-9), rel=1e-3)  # ... and the ramp's end is smooth (a kink would jump by ~ A pi / 2 T_r)
+    assert h.kinks() == pytest.approx([t0, t0 + 1e-3, t0 + Tr, t0 + 1e-3 - Tr])
+    s = 1e-3 - 0.3 * Tr  # the mirrored ramp at the end
+    assert h(t0 + s) == pytest.approx(A * 0.5 * (1 - math.cos(math.pi * 0.3)) * math.sin(2 * math.pi * f * s + ph), rel=1e-12)
+    assert abs(h(t0 + 1e-3 - eps)) < 1e-9
+    assert h.top_frequency == f
+    running = np.array([quad(h, t0, t0 + x, limit=400)[0] for x in np.linspace(0, 10 / f, 201)])
+    assert np.abs(running).max() <= h.peak_impulse()
+
+
+@pytest.mark.parametrize("mode", ["linear", "log"])
+def test_chirp_instantaneous_frequency(mode):
+    """A chirp from f0 to f1: the phase's slope / 2 pi (by central differences) is f0 + (f1 - f0)
+    s / D (linear) or f0 (f1 / f0)^(s / D) (log), and the force is A sin(phase) past the ramp."""
+    from granel.excitation import chirp, chirp_phase
+
+    A, f0, f1, D = 2.0, 1e3, 4e4, 2e-3
+    c = chirp(A, f0, f1, D, t0=0.0, mode=mode)
+    for s in (0.0, 0.3 * D, 0.9 * D, D):
+        ds = 1e-9
+        lo, hi = max(s - ds, 0.0), min(s + ds, D)
+        freq = (chirp_phase(hi, f0, f1, D, mode == "log") - chirp_phase(lo, f0, f1, D, mode == "log")) / (hi - lo) / (2 * math.pi)
+        want = f0 + (f1 - f0) * s / D if mode == "linear" else f0 * (f1 / f0) ** (s / D)
+        assert freq == pytest.approx(want, rel=1e-5)
+    s = 0.37 * D
+    assert c(s) == pytest.approx(A * math.sin(chirp_phase(s, f0, f1, D, mode == "log")), rel=1e-13)
+    assert c(D + 1e-9) == 0.0 and c.top_frequency == f1
+
+
+@pytest.mark.parametrize("kind", ["harmonic", "chirp"])
+def test_compiled_drive_matches_the_reference(kind):
+    """The compiled load (granular.kernels.load_value) against the Python reference at 2,001 times,
+    and a free granule's velocity after the drive against the quadrature of F / m."""
+    from numba import njit
+
+    from granel.excitation import chirp, harmonic
+    from granel.granular.kernels import load_value
+    from granel.granular.system import load_bundle
+
+    hist = harmonic(5.0, 3e4, t0=2e-6, duration=2e-4, phase=0.3, ramp_cycles=1.5) if kind == "harmonic" else \
+        chirp(5.0, 2e4, 6e4, 2e-4, t0=2e-6, mode="log", ramp_cycles=1.0)
+
+    @njit
+    def values(loads, ts):
+        out = np.empty_like(ts)
+        for k in range(ts.shape[0]):
+            out[k] = load_value(loads, 0, ts[k])
+        return out
+
+    ts = np.linspace(0, 2.2e-4, 2001)
+    loads = load_bundle([Excitation(0, (1.0, 0.0), hist)])
+    np.testing.assert_allclose(values(loads, ts), [hist(t) for t in ts], rtol=1e-12, atol=1e-12)
+    R = 0.005
+    system = make_system([("a", 0.0, 0.0, R)], excitations=[Excitation(0, (1.0, 0.0), hist)])
+    state = initial_state(system)
+    Stepper(system).advance(state, 1e-8, 22000)
+    m = 4 / 3 * math.pi * R**3 * 7850.0
+    J = quad(hist, 0, 2.2e-4, points=hist.kinks(), limit=2000, epsabs=1e-15, epsrel=1e-10)[0]
+    assert state.vel[0, 0] == pytest.approx(J / m, rel=1e-7, abs=1e-12 * abs(hist.peak_impulse() / m))

@@ -156,9 +156,32 @@ def test_the_adaptive_exact_integrator_puts_outputs_on_the_grid_whatever_dt():
     ['excitations.0.kind="constant"', "excitations.0.value=1e9"],
     ['excitations.0.kind="burst"', "excitations.0.amplitude=1e9", "excitations.0.frequency=1e4", "excitations.0.cycles=1"],
     ["excitations.0.fmax=1e9"],
+    ['excitations.0.kind="harmonic"', "excitations.0.amplitude=1e9", "excitations.0.frequency=1e4"],
+    ['excitations.0.kind="chirp"', "excitations.0.amplitude=1e9", "excitations.0.f0=1e3", "excitations.0.f1=1e4",
+     'excitations.0.duration="0.1ms"'],
 ])
 def test_loads_beyond_hertz_contact_are_refused(overrides):
     refused(overrides, "excitations.0", "overlap_limit")
+
+
+@pytest.mark.parametrize("overrides, words", [
+    (['excitations.0.kind="harmonic"', "excitations.0.amplitude=10"], ["excitations.0", "frequency"]),
+    (['excitations.0.kind="harmonic"', "excitations.0.frequency=1e4"], ["excitations.0", "amplitude"]),
+    (['excitations.0.kind="harmonic"', "excitations.0.amplitude=10", "excitations.0.frequency=-1e4"],
+     ["excitations.0.frequency", "greater than 0"]),
+    (['excitations.0.kind="harmonic"', "excitations.0.amplitude=10", "excitations.0.frequency=1e4",
+      "excitations.0.ramp_cycles=-1"], ["excitations.0.ramp_cycles"]),
+    (['excitations.0.kind="harmonic"', "excitations.0.amplitude=10", "excitations.0.frequency=1e4",
+      'excitations.0.duration="-1ms"'], ["excitations.0.duration", "positive"]),
+    (['excitations.0.kind="harmonic"', "excitations.0.amplitude=10", "excitations.0.frequency=1e4",
+      "excitations.0.phase=nan"], ["excitations.0.phase", "finite"]),
+    (['excitations.0.kind="chirp"', "excitations.0.amplitude=10", "excitations.0.f0=1e3", "excitations.0.f1=1e4"],
+     ["excitations.0", "duration"]),
+    (['excitations.0.kind="chirp"', "excitations.0.amplitude=10", "excitations.0.f0=1e3", "excitations.0.f1=1e4",
+      'excitations.0.duration="0.1ms"', 'excitations.0.mode="cubic"'], ["excitations.0.mode"]),
+])
+def test_narrowband_drives_need_their_fields(overrides, words):
+    refused(overrides, *words)
 
 
 def test_a_constant_load_enters_the_safe_step():

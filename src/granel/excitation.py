@@ -1,4 +1,6 @@
-"""Load histories applied to granules: half-sine shocks, harmonic bursts, tabulated forces.
+"""Load histories applied to granules: half-sine shocks, harmonic bursts, tabulated forces,
+constant forces (preloads), and narrowband drives: harmonic forces with a smooth ramp-up and
+chirps sweeping a frequency band.
 
 Each history is encoded as (kind, params, table) so that the compiled integrator can
 evaluate it at any RK4 stage time without calling back into Python.
@@ -19,7 +21,12 @@ KIND_HALF_SINE = 0
 KIND_BURST = 1
 KIND_TABLE = 2
 KIND_CONSTANT = 3
-KIND_CODES = {"half_sine": KIND_HALF_SINE, "burst": KIND_BURST, "table": KIND_TABLE, "constant": KIND_CONSTANT}
+KIND_HARMONIC = 4
+KIND_CHIRP = 5
+KIND_CODES = {"half_sine": KIND_HALF_SINE, "burst": KIND_BURST, "table": KIND_TABLE, "constant": KIND_CONSTANT,
+              "harmonic": KIND_HARMONIC, "chirp": KIND_CHIRP}
+LOAD_PARAMS = 8  # the compiled loads' parameter slots per load
+CHIRP_MODES = {"linear": 0.0, "log": 1.0}
 
 
 @dataclass(frozen=True)
@@ -44,7 +51,35 @@ class LoadHistory:
             return p[2] + p[3] / p[1]
         if self.kind == "table":
             return float(self.times[-1]) if self.values[-1] == 0 else math.inf
+        if self.kind in ("harmonic", "chirp"):
+            return p[2] + p[3]
         return math.inf
+
+    def kinks(self) -> list[float]:
+        """Times where the history is not smooth (a step of the adaptive integrator stops there)."""
+        p = self.params
+        if self.kind == "half_sine":
+            return [p[2], p[2] + p[1]]
+        if self.kind == "burst":
+            return [p[2], p[2] + p[3] / p[1]]
+        if self.kind == "table":
+            return list(np.asarray(self.times, float))
+        if self.kind in ("harmonic", "chirp"):
+            out = [p[2], p[2] + p[3]]
+            if p[5] > 0:  # the ends of the ramps: the second derivative jumps
+                out += [p[2] + p[5] / p[1], p[2] + p[3] - p[5] / p[1]]
+            return [t for t in out if math.isfinite(t)]
+        return []
+
+    @property
+    def top_frequency(self) -> float:
+        """The highest frequency of a periodic history [Hz] (0 for the others)."""
+        p = self.params
+        if self.kind in ("burst", "harmonic"):
+            return p[1]
+        if self.kind == "chirp":
+            return max(p[1], p[4])
+        return 0.0
 
     def impulse(self) -> float:
         """Time integral of F over its support (inf for a constant force)."""
@@ -55,7 +90,7 @@ class LoadHistory:
             return p[0] * (1.0 - math.cos(2.0 * math.pi * p[3])) / (2.0 * math.pi * p[1])
         if self.kind == "table":
             return float(np.trapezoid(self.values, self.times))
-        return math.inf
+        return math.inf  # constant, or a drive without an analytic integral
 
     def peak_impulse(self) -> float:
         """The largest |int_0^t F| over t: the most momentum the load can give a free body at any
@@ -71,6 +106,10 @@ class LoadHistory:
                 return 0.0
             steps = 0.5 * (self.values[1:] + self.values[:-1]) * np.diff(self.times)
             return float(np.max(np.abs(np.concatenate([[0.0], np.cumsum(steps)]))))
+        if self.kind in ("harmonic", "chirp"):
+            # |int A r(s) sin(phase(s)) ds| over half a period of the lowest frequency, at most
+            f_low = p[1] if self.kind == "harmonic" else min(p[1], p[4])
+            return abs(p[0]) / (math.pi * f_low)
         return math.inf
 
     def peak(self) -> float:
@@ -91,6 +130,44 @@ def harmonic_burst(amplitude: float, frequency: float, cycles: float, t0: float 
 
 def constant_force(value: float) -> LoadHistory:
     return LoadHistory("constant", (float(value),))
+
+
+def harmonic(amplitude: float, frequency: float, t0: float = 0.0, duration: float = math.inf, phase: float = 0.0,
+             ramp_cycles: float = 0.0) -> LoadHistory:
+    """F(t) = amplitude r(s) sin(2 pi f s + phase), s = t - t0, for 0 <= s <= duration: a
+    narrowband drive. The ramp r(s) = (1 - cos(pi s / T_r)) / 2 over the first T_r = ramp_cycles
+    / f, and its mirror over the last T_r of a finite duration (1 between, or throughout when
+    ramp_cycles = 0), starts and stops it without a jump in force or slope, which would excite
+    every frequency."""
+    return LoadHistory("harmonic", (float(amplitude), float(frequency), float(t0), float(duration), float(phase),
+                                    float(ramp_cycles)))
+
+
+def chirp(amplitude: float, f0: float, f1: float, duration: float, t0: float = 0.0, mode: str = "linear",
+          ramp_cycles: float = 0.0) -> LoadHistory:
+    """F(t) = amplitude r(s) sin(phi(s)) for 0 <= s = t - t0 <= duration, its frequency phi' / 2 pi
+    sweeping from f0 to f1 linearly, phi = 2 pi (f0 s + (f1 - f0) s^2 / 2 D), or geometrically
+    (mode "log"), phi = 2 pi f0 D (k^(s / D) - 1) / ln k with k = f1 / f0; r as in `harmonic` (up
+    and down), its ramp_cycles counted at f0."""
+    return LoadHistory("chirp", (float(amplitude), float(f0), float(t0), float(duration), float(f1), float(ramp_cycles),
+                                 CHIRP_MODES[mode]))
+
+
+def ramp(s: float, t_ramp: float, duration: float = math.inf) -> float:
+    """The drives' envelope at s into them: (1 - cos(pi s / t_ramp)) / 2 for s < t_ramp, the same
+    mirrored over the last t_ramp of a finite duration, 1 between (and for t_ramp = 0)."""
+    if t_ramp <= 0.0:
+        return 1.0
+    x = min(s, duration - s) / t_ramp
+    return 1.0 if x >= 1.0 else 0.5 * (1.0 - math.cos(math.pi * x))
+
+
+def chirp_phase(s: float, f0: float, f1: float, duration: float, log: bool) -> float:
+    """phi(s) of `chirp` (its frequency phi' / 2 pi goes from f0 at s = 0 to f1 at s = duration)."""
+    if log and f1 != f0:
+        k = f1 / f0
+        return 2.0 * math.pi * f0 * duration * math.expm1(s / duration * math.log(k)) / math.log(k)
+    return 2.0 * math.pi * (f0 * s + 0.5 * (f1 - f0) * s * s / duration)
 
 
 def tabulated(times, values) -> LoadHistory:
@@ -145,4 +222,12 @@ def force_value(kind: int, params: np.ndarray, times: np.ndarray, values: np.nda
         if t < times[0] or t > times[-1]:
             return 0.0
         return float(np.interp(t, times, values))
+    if kind in (KIND_HARMONIC, KIND_CHIRP):
+        amp, f, t0, dur = params[0], params[1], params[2], params[3]
+        s = t - t0
+        if s < 0.0 or s > dur:
+            return 0.0
+        if kind == KIND_HARMONIC:
+            return amp * ramp(s, params[5] / f, dur) * math.sin(2.0 * math.pi * f * s + params[4])
+        return amp * ramp(s, params[5] / f, dur) * math.sin(chirp_phase(s, f, params[4], dur, params[6] > 0.5))
     return float(params[0])

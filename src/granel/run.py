@@ -100,17 +100,7 @@ def auto_mode_cutoff(system, v_ref: float, rtol: float) -> float:
 
 def load_kinks(system) -> list[float]:
     """Times where a load's history is not smooth: a step never crosses them."""
-    out = []
-    for e in system.excitations:
-        h = e.history
-        p = h.params
-        if h.kind == "half_sine":
-            out += [p[2], p[2] + p[1]]
-        elif h.kind == "burst":
-            out += [p[2], p[2] + p[3] / p[1]]
-        elif h.kind == "table":
-            out += list(np.asarray(h.times, float))
-    return out
+    return [t for e in system.excitations for t in e.history.kinks()]
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,

@@ -92,9 +92,20 @@ def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
 
 
 @njit(cache=True, inline="always")
+def _ramp(s, t_ramp, duration):
+    """`excitation.ramp`: the drives' envelope, up over the first t_ramp and down over the last."""
+    if t_ramp <= 0.0:
+        return 1.0
+    x = min(s, duration - s) / t_ramp
+    return 1.0 if x >= 1.0 else 0.5 * (1.0 - math.cos(math.pi * x))
+
+
+@njit(cache=True, inline="always")
 def load_value(loads, e, t):
     """F(t) of applied load e: half-sine (fmax, tau, t0), burst (amp, f, t0, cycles), table
-    (linear interpolation, zero outside) or constant."""
+    (linear interpolation, zero outside), constant, harmonic (amp, f, t0, duration, phase,
+    ramp cycles) or chirp (amp, f0, t0, duration, f1, ramp cycles, log); `excitation` has the
+    formulas and a Python twin."""
     kind = loads.kind[e]
     par = loads.params[e]
     if kind == 0:
@@ -123,6 +134,19 @@ def load_value(loads, e, t):
             return loads.tab_v[lo]
         w = (t - tt[lo]) / (tt[hi] - tt[lo])
         return loads.tab_v[lo] * (1.0 - w) + loads.tab_v[hi] * w
+    if kind == 4 or kind == 5:
+        s = t - par[2]
+        if s < 0.0 or s > par[3]:
+            return 0.0
+        f = par[1]
+        if kind == 4:
+            phase = 2.0 * math.pi * f * s + par[4]
+        elif par[6] > 0.5 and par[4] != f:  # a geometric chirp
+            k = math.log(par[4] / f)
+            phase = 2.0 * math.pi * f * par[3] * math.expm1(s / par[3] * k) / k
+        else:
+            phase = 2.0 * math.pi * (f * s + 0.5 * (par[4] - f) * s * s / par[3])
+        return par[0] * _ramp(s, par[5] / f, par[3]) * math.sin(phase)
     return par[0]
 
 

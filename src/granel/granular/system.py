@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..excitation import KIND_CODES, LoadHistory
+from ..excitation import KIND_CODES, LOAD_PARAMS, LoadHistory
 from ..materials import (
     damping_coefficient,
     effective_mass,
@@ -294,14 +294,14 @@ def load_bundle(excitations: list[Excitation]) -> Loads:
     ne = len(excitations)
     direction = np.zeros((ne, 2))
     kind = np.zeros(ne, dtype=np.int64)
-    params = np.zeros((ne, 4))
+    params = np.zeros((ne, LOAD_PARAMS))
     offset = np.zeros(ne + 1, dtype=np.int64)
     tt, tv = [], []
     for k, e in enumerate(excitations):
         d = np.asarray(e.direction, float)
         direction[k] = d / np.hypot(*d)
         kind[k] = KIND_CODES[e.history.kind]
-        p = list(e.history.params)[:4]
+        p = list(e.history.params)[:LOAD_PARAMS]
         params[k, : len(p)] = p
         tt.append(np.asarray(e.history.times, float))
         tv.append(np.asarray(e.history.values, float))

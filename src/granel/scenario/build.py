@@ -131,8 +131,8 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             speed = max(speed, J / m)
         if e.history.kind == "half_sine":
             bounds.append(e.history.params[1] / 10.0)
-        elif e.history.kind == "burst":
-            bounds.append(1.0 / (e.history.params[1] * 20.0))
+        elif e.history.top_frequency > 0:
+            bounds.append(1.0 / (e.history.top_frequency * 20.0))
     if (speed > 0 or force > 0) and system.n:
         kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
         for g in np.unique(kinds, axis=0, return_index=True)[1]:

@@ -10,7 +10,8 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 from pydantic.fields import FieldInfo
 
-from ..excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, constant_force, half_sine, harmonic_burst, read_force_csv
+from ..excitation import (PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst,
+                          read_force_csv)
 from ..materials import Material
 from ..units import parse_time
 
@@ -198,22 +199,35 @@ class WallSpec(_Strict):
 
 class ExcitationSpec(_Strict):
     granule: str = Field(min_length=1)
-    kind: Literal["half_sine", "burst", "table", "constant"] = "half_sine"
+    kind: Literal["half_sine", "burst", "table", "constant", "harmonic", "chirp"] = "half_sine"
     shock: Literal["weak", "moderate", "strong"] | None = None
     fmax: float | None = None
     tau: float = PAPER_TAU
     t0: float = 0.0
     amplitude: float | None = None
-    frequency: float | None = Field(None, gt=0)
+    frequency: float | None = Field(None, gt=0, description="burst, harmonic [Hz]")
     cycles: float | None = Field(None, gt=0)
+    phase: float = Field(0.0, description="harmonic: phase at t0 [rad]")
+    ramp_cycles: float = Field(0.0, ge=0, description="harmonic, chirp: cycles of the smooth ramp-up (at f0 for a chirp)")
+    duration: float | None = Field(None, description="harmonic (default: to the end of the run), chirp: how long it drives [s]")
+    f0: float | None = Field(None, gt=0, description="chirp: start frequency [Hz]")
+    f1: float | None = Field(None, gt=0, description="chirp: end frequency [Hz]")
+    mode: Literal["linear", "log"] = Field("linear", description="chirp: linear or geometric (log) sweep")
     value: float | None = None
     file: str | None = None
     direction: Union[Literal["toward_solid", "away_from_solid"], tuple[float, float]] = "toward_solid"
 
-    @field_validator("tau", "t0", mode="before")
+    @field_validator("tau", "t0", "duration", mode="before")
     @classmethod
     def _parse(cls, v):
-        return _time(v)
+        return None if v is None else _time(v)
+
+    @field_validator("duration")
+    @classmethod
+    def _duration_pos(cls, v):
+        if v is not None and not v > 0:
+            raise ValueError(f"must be a positive time, got {v!r}")
+        return v
 
     @field_validator("tau")
     @classmethod
@@ -243,12 +257,20 @@ class ExcitationSpec(_Strict):
                 raise ValueError("a table excitation needs 'file' (CSV of time,force)")
         elif self.kind == "constant" and self.value is None:
             raise ValueError("a constant excitation needs 'value' [N]")
+        elif self.kind == "harmonic":
+            for f in ("amplitude", "frequency"):
+                if getattr(self, f) is None:
+                    raise ValueError(f"a harmonic excitation needs '{f}'")
+        elif self.kind == "chirp":
+            for f in ("amplitude", "f0", "f1", "duration"):
+                if getattr(self, f) is None:
+                    raise ValueError(f"a chirp needs '{f}'")
         return self
 
     def peak_force(self) -> float:
         if self.kind == "half_sine":
             return abs(self.fmax if self.fmax is not None else SHOCK_LEVELS[self.shock])
-        if self.kind == "burst":
+        if self.kind in ("burst", "harmonic", "chirp"):
             return abs(self.amplitude)
         if self.kind == "constant":
             return abs(self.value)
@@ -262,6 +284,10 @@ class ExcitationSpec(_Strict):
             return harmonic_burst(self.amplitude, self.frequency, self.cycles, self.t0)
         if self.kind == "constant":
             return constant_force(self.value)
+        if self.kind == "harmonic":
+            return harmonic(self.amplitude, self.frequency, self.t0, self.duration or math.inf, self.phase, self.ramp_cycles)
+        if self.kind == "chirp":
+            return chirp(self.amplitude, self.f0, self.f1, self.duration, self.t0, self.mode, self.ramp_cycles)
         path = Path(self.file)
         if base is not None and not path.is_absolute():
             path = base / path
