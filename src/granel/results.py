@@ -189,6 +189,7 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         "granule": ("granule", np.array(system.labels, dtype=object)),
         "medium": ("granule", np.array([system.media[k] for k in system.medium_index], dtype=object)),
         "contact": ("contact", np.array(names, dtype=object)),
+        "wall": ("wall", np.array(wall_names(system), dtype=object)),
     }
     pos, vel = r("pos"), r("vel")
     data = {
@@ -214,10 +215,23 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         data[key] = ("time", r(key).astype(float), {"units": "J", "long_name": long})
     for key, long in (("normal", "normal force on the solid (along n_ik)"), ("tangential", "tangential force on the solid (along t_ik = k x n_ik)")):
         data[f"contact_force_{key}"] = (("time", "contact"), r(f"force_{key}").astype(float).reshape(nt, -1), {"units": "N", "long_name": long})
+    if "wall_force" in traj.names and system.walls:
+        fw = r("wall_force").astype(float).reshape(nt, len(system.walls), 2)
+        nrm = np.array([np.asarray(w.normal, float) / np.hypot(*w.normal) for w in system.walls])
+        tan = np.array([(np.asarray(w.p1, float) - w.p0) / np.hypot(*(np.asarray(w.p1, float) - w.p0)) for w in system.walls])
+        data["wall_force_normal"] = (("time", "wall"), -np.einsum("kwi,wi->kw", fw, nrm),
+                                     {"units": "N", "long_name": "force pressing each rigid wall (along -n, n into the granules)"})
+        data["wall_force_tangential"] = (("time", "wall"), np.einsum("kwi,wi->kw", fw, tan),
+                                         {"units": "N", "long_name": "force on each rigid wall along it (p0 -> p1)"})
     data.update(_step_variables(traj, t, len(names)))
     if model.ndof:
         data.update(_solid_variables(traj, omega))
     return ResultSpec(data, coords, attrs)
+
+
+def wall_names(system) -> list[str]:
+    """A name for each rigid wall: its own (e.g. SSGM:top), else wall k."""
+    return [w.name or f"wall {k}" for k, w in enumerate(system.walls)]
 
 
 def _step_variables(traj, times: np.ndarray, nc: int) -> dict:

@@ -16,6 +16,7 @@ import numpy as np
 from . import scenario as S
 from .checkpoint import fingerprint
 from .coupling.driver import drive
+from .granular.system import load_scales
 from .problem import Problem
 from .results import base_attrs, trajectory_spec
 
@@ -57,17 +58,8 @@ def make_solver(problem: Problem, sparse: bool | None = None):
 
 
 def reference_scales(problem: Problem) -> tuple[float, float]:
-    """The velocity and energy scales of the adaptive step's error: the largest speed a load can
-    give its granule (peak impulse / mass) and the kinetic energy that carries (or the initial
-    motion's); 1 m/s and 1 J if neither is bounded."""
-    s = problem.system
-    speeds = [(e.history.peak_impulse() / s.mass[e.granule], s.mass[e.granule]) for e in s.excitations]
-    v = np.abs(problem.state.vel)
-    speeds += [(float(np.hypot(*problem.state.vel[g])), s.mass[g]) for g in np.flatnonzero(v.max(axis=1) > 0)] if v.size else []
-    finite = [(sp, m) for sp, m in speeds if np.isfinite(sp) and sp > 0]
-    if not finite:
-        return 1.0, 1.0
-    return max(sp for sp, _ in finite), max(0.5 * m * sp * sp for sp, m in finite)
+    """The velocity and energy scales of the adaptive step's error (`granular.system.load_scales`)."""
+    return load_scales(problem.system, problem.state)
 
 
 # the automatic cut-off's most eigenmodes on a solid beyond solid.modal.DENSE_LIMIT DOFs

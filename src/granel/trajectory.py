@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 GRANULAR = ("pos", "theta", "vel", "omega", "energy_media", "energy_solid", "energy_solid_kinetic", "energy_solid_potential",
-            "dissipated_viscous", "dissipated_friction", "input_work", "balance_error", "force_normal", "force_tangential")
+            "dissipated_viscous", "dissipated_friction", "input_work", "balance_error", "force_normal", "force_tangential", "wall_force")
 STEPS = ("t", "h", "iterations", "lam")
 STEP_TYPES = {"t": float, "h": float, "iterations": np.int64, "lam": np.float32}
 

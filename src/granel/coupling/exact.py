@@ -49,7 +49,7 @@ from numba import njit
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope, tanh_friction
 from ..granular.kernels import (friction_rate, granule_energies, interface_forces, moved_beyond, overlaps, rhs, rk4_step,
-                                rk4_substepped)
+                                rk4_substepped, wall_forces)
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
@@ -1023,13 +1023,14 @@ class OutputQuantities(NamedTuple):
     su: np.ndarray  # (K, nc, 2)
     overlap: np.ndarray  # (K,)
     where: np.ndarray  # (K, 2) int: kind, index
+    walls: np.ndarray  # (K, n_walls, 2): the force each wall takes
 
 
 @njit(cache=True)
 def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
     """Per output o of a batch: each medium's energy (11) in q.media[o], the solid's kinetic and
     potential energy, the contacts' displacement, the deepest overlap (eq. 2) over the smaller
-    radius with its kind (0 pair, 1 wall, 2 solid) and index."""
+    radius with its kind (0 pair, 1 wall, 2 solid) and index, and the force on each wall."""
     nc = solid.P.shape[0] // 2
     radius = model.granules.radius
     pairs, walls, points = model.pairs, model.walls, model.points
@@ -1064,6 +1065,7 @@ def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
         q.overlap[o] = best
         q.where[o, 0] = kind
         q.where[o, 1] = idx
+        wall_forces(oy[o], model, q.walls[o])
 
 
 class StepData(NamedTuple):

@@ -196,7 +196,7 @@ def observation(stepper: Stepper, g: GranularState, su, solid_energy, F, tangent
             "energy_solid": ek + ep, "energy_solid_kinetic": ek, "energy_solid_potential": ep, "dissipated_viscous": dv,
             "dissipated_friction": df, "input_work": w, "balance_error": ek + ep + em.sum() + dv + df - w,
             "force_normal": np.einsum("ij,ij->i", F, normals), "force_tangential": np.einsum("ij,ij->i", F, tangents),
-            "overlap_ratio": ratio, "overlap_at": where}
+            "wall_force": stepper.wall_forces(g), "overlap_ratio": ratio, "overlap_at": where}
 
 
 class _Labels:
@@ -347,7 +347,7 @@ class ExactSolver:
         quantities of eqs. (11)-(13) computed by one compiled call."""
         K, nc = len(out[0]), len(self.system.solid_contacts)
         q = exact.OutputQuantities(np.zeros((K, len(self.system.media))), np.zeros((K, 2)), np.zeros((K, nc, 2)), np.zeros(K),
-                                   np.zeros((K, 2), np.int64))
+                                   np.zeros((K, 2), np.int64), np.zeros((K, len(self.system.walls), 2)))
         if n:
             exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], self.stepper.model, self.solid,
                                     self.system.medium_index, len(self.system.media), q)
@@ -417,7 +417,7 @@ class ExactSolver:
                 "energy_solid_potential": ep, "dissipated_viscous": dv, "dissipated_friction": df, "input_work": w,
                 "balance_error": ek + ep + em.sum(axis=1) + dv + df - w,
                 "force_normal": np.einsum("kij,ij->ki", F, self.normals),
-                "force_tangential": np.einsum("kij,ij->ki", F, self.solid.frame.tangent),
+                "force_tangential": np.einsum("kij,ij->ki", F, self.solid.frame.tangent), "wall_force": q.walls[rows],
                 "overlap_ratio": q.overlap[rows],
                 "overlap_at": _Labels(lambda i: contact_label(self.system, model, int(where[i, 0]), int(where[i, 1])), len(rows))}
 

@@ -72,23 +72,29 @@ def motion_at(motion, c, tau):
 
 
 @njit(cache=True, inline="always")
-def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
-    """Forces and torque on granule i from a flat partner (wall or solid point) along n_ik =
-    (nx, ny), given its velocity relative to the partner (rvx, rvy); returns the (viscous,
-    friction) power lost."""
-    n = radius.shape[0]
-    V = 3 * n
-    OM = 5 * n
+def one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
+    """The force (fx, fy) and torque on granule i from a flat partner (wall or solid point) along
+    n_ik = (nx, ny), given its velocity relative to the partner (rvx, rvy), eqs. (2)-(6), and the
+    (viscous, friction) power they dissipate."""
+    OM = 5 * radius.shape[0]
     tx = -ny
     ty = nx
     Ri = radius[i]
     ddelta = rvx * nx + rvy * ny
     vt = rvx * tx + rvy * ty + Ri * y[OM + i]
     fn, ft, gam = contact_law(A, G, delta, ddelta, vt, law.mu, law.k_s)
-    dy[V + 2 * i] += -fn * nx + ft * tx
-    dy[V + 2 * i + 1] += -fn * ny + ft * ty
-    dy[OM + i] += Ri * ft
-    return gam * ddelta * ddelta, -ft * vt
+    return -fn * nx + ft * tx, -fn * ny + ft * ty, Ri * ft, gam * ddelta * ddelta, -ft * vt
+
+
+@njit(cache=True, inline="always")
+def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
+    """`one_sided_force` added to granule i's derivative; returns the (viscous, friction) power."""
+    V = 3 * radius.shape[0]
+    fx, fy, tq, pv, pf = one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law)
+    dy[V + 2 * i] += fx
+    dy[V + 2 * i + 1] += fy
+    dy[5 * radius.shape[0] + i] += tq
+    return pv, pf
 
 
 @njit(cache=True, inline="always")
@@ -382,6 +388,26 @@ def granule_energies(y, model, su):
         if ds[c] > 0.0:
             pot[model.points.g[c]] += hertz_potential(model.points.A[c], ds[c])
     return kin, rot, pot
+
+
+@njit(cache=True)
+def wall_forces(y, model, out):
+    """The force each rigid wall takes from the granules (out (nw, 2), x and y), the opposite of
+    the wall contacts' forces on the granules (`one_sided_force`, as in `rhs`)."""
+    radius = model.granules.radius
+    n = radius.shape[0]
+    walls = model.walls
+    out[:, :] = 0.0
+    for c in range(walls.g.shape[0]):
+        i = walls.g[c]
+        w = walls.w[c]
+        delta = wall_overlap(y, i, w, radius, walls)
+        if delta <= 0.0:
+            continue
+        fx, fy, _, _, _ = one_sided_force(y, radius, i, -walls.normal[w, 0], -walls.normal[w, 1], delta, y[3 * n + 2 * i],
+                                          y[3 * n + 2 * i + 1], walls.A[c], walls.G[c], model.law)
+        out[w, 0] -= fx
+        out[w, 1] -= fy
 
 
 @njit(cache=True, inline="always")

@@ -289,6 +289,19 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
+def load_scales(system: GranularSystem, state: GranularState) -> tuple[float, float]:
+    """A run's velocity and energy scales: the largest speed a load can give its granule (peak
+    impulse / mass) and the kinetic energy that carries, or those of the initial motion; 1 m/s
+    and 1 J if neither is bounded (constant loads alone)."""
+    speeds = [(e.history.peak_impulse() / system.mass[e.granule], system.mass[e.granule]) for e in system.excitations]
+    v = np.abs(state.vel)
+    speeds += [(float(np.hypot(*state.vel[g])), system.mass[g]) for g in np.flatnonzero(v.max(axis=1) > 0)] if v.size else []
+    finite = [(sp, m) for sp, m in speeds if np.isfinite(sp) and sp > 0]
+    if not finite:
+        return 1.0, 1.0
+    return max(sp for sp, _ in finite), max(0.5 * m * sp * sp for sp, m in finite)
+
+
 def load_bundle(excitations: list[Excitation]) -> Loads:
     """The applied loads as compiled-kernel arrays (kinds in excitation.KIND_CODES)."""
     ne = len(excitations)
@@ -397,6 +410,12 @@ class Stepper:
                 k = int(np.argmax(ratio))
                 cands.append((float(ratio[k]), contact_label(self.system, m, kind, k)))
         return max(cands)
+
+    def wall_forces(self, state: GranularState) -> np.ndarray:
+        """The force each rigid wall takes from the granules, (n_walls, 2) [N]."""
+        out = np.zeros((len(self.system.walls), 2))
+        kernels.wall_forces(state.y, self.model, out)
+        return out
 
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:
         """Energy of each medium, eq. (11): shape (n_media,)."""

@@ -12,7 +12,7 @@ import numpy as np
 from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
 from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
-from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, close_pairs, initial_state
+from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, close_pairs, initial_state, load_scales
 from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
@@ -321,11 +321,16 @@ def schedule(sc: Scenario) -> Schedule:
     return Schedule(sim.duration, sim.dt, sim.output_every, sim.solid_output_every, sim.checkpoint_every)
 
 
+# the balance guard measures errors against at least this share of the loads' energy scale, so
+# that the round-off of a run's first, nearly unloaded outputs does not stop it
+GUARD_ENERGY_FLOOR = 1e-3
+
+
 def build_problem(sc: Scenario) -> Problem:
     """Everything a solver needs, built once (the granular system from validation is reused)."""
     text = to_toml(sc)
     built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
     system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
     state = type(state)(state.y.copy(), state.t)
-    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit)
+    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state)[1])
     return Problem(system, state, build_solid(sc, system), solver_settings(sc), schedule(sc), text, guards)
