@@ -83,3 +83,89 @@ def test_momentum_balance_against_walls_and_the_solid():
     assert ssgm.sum() == 14 and np.abs(P[:, 0]).max() > 1e-4  # the drive moved the medium
     impulse = np.array([[simpson(net[: k + 1, d], x=t[: k + 1]) for d in range(2)] for k in range(0, len(t), 40)])
     np.testing.assert_allclose(P[::40] - P[0], impulse, rtol=0, atol=2e-4 * np.abs(P[:, 0]).max())
+
+
+def chain_scenario(tmp_path, n=10, preload=10.0, extra=""):
+    """A monatomic chain of steel beads (R = 5 mm) along x, touching, against a wall at its far
+    end; a constant load `preload` pushes the first bead toward it (the solid is a rigid block far
+    away); friction and damping off unless `extra` sets them."""
+    R = 0.005
+    rows = ["label,x,y,radius"] + [f"{k + 1},{2 * R * k!r},0.0,{R}" for k in range(n)]
+    (tmp_path / "chain.csv").write_text("\n".join(rows) + "\n")
+    xw = 2 * R * (n - 1) + R
+    (tmp_path / "chain.toml").write_text(f"""name = "chain"
+[simulation]
+duration = "20us"
+equilibrate = true
+[contact]
+mu = 0.0
+alpha_n = 0.0
+[solid]
+kind = "rigid"
+x0 = 1.0
+y0 = 1.0
+[[media]]
+name = "C"
+side = "none"
+granules_file = "chain.csv"
+radius = {R}
+[[walls]]
+p0 = [{xw!r}, -0.01]
+p1 = [{xw!r}, 0.01]
+normal = [-1.0, 0.0]
+name = "far"
+[[excitations]]
+granule = "C:1"
+kind = "constant"
+value = {preload!r}
+direction = [1.0, 0.0]
+{extra}
+""")
+    return tmp_path / "chain.toml"
+
+
+def test_equilibrium_of_a_precompressed_chain(tmp_path):
+    """`simulation.equilibrate`: every contact of a chain pressed by F0 = 10 N against a wall carries
+    F0, at Hertz's overlaps (F0 / A)^(2/3) with A = 4/3 E* sqrt(R*) (pairs: E* = E / 2(1 - nu^2),
+    R* = R / 2; wall: E / (1 - nu^2), R), and the run starts and stays at rest."""
+    sc = S.load(str(chain_scenario(tmp_path)))
+    problem = S.build_problem(sc)
+    rep = problem.equilibrium
+    E, nu, R, F0 = 200e9, 0.3, 0.005, 10.0
+    A_pair = 4 / 3 * E / (2 * (1 - nu**2)) * math.sqrt(R / 2)
+    A_wall = 4 / 3 * E / (1 - nu**2) * math.sqrt(R)
+    assert rep["equilibrium_loaded_pairs"] == 9 and rep["equilibrium_loaded_walls"] == 1
+    assert rep["equilibrium_max_pair_force_N"] == pytest.approx(F0, rel=1e-9)
+    assert rep["equilibrium_max_wall_force_N"] == pytest.approx(F0, rel=1e-9)
+    x = problem.state.pos[:, 0]
+    gaps = 2 * R - np.diff(x)  # the pairs' overlaps
+    np.testing.assert_allclose(gaps, (F0 / A_pair) ** (2 / 3), rtol=1e-8)
+    assert R - (2 * R * 9 + R - x[-1]) == pytest.approx((F0 / A_wall) ** (2 / 3), rel=1e-8)
+    ds = run_scenario(sc)
+    np.testing.assert_allclose(ds["wall_force_normal"].values[:, 0], F0, rtol=1e-9)
+    assert np.abs(ds["v_x"].values).max() < 1e-9
+
+
+@pytest.mark.parametrize("solid", ["rigid", "beam", "plate"])
+def test_preloaded_medium_starts_at_rest_on_any_solid(solid):
+    """The paper's SSGM pressed by 100 N on C against a rigid, beam or plate solid: the static
+    equilibrium (granules, walls, and the solid's static compliance at its contacts) is a state of
+    the dynamics: over 20 us no granule moves faster than 1e-8 m/s (a 100 N step load would send C
+    to about 0.5 m/s), and the balance (13) holds to 1e-12 of the solid's strain energy scale."""
+    sc = S.load("paper", [f'solid.kind="{solid}"', 'excitations.0.granule="SSGM:C"', 'excitations.0.kind="constant"',
+                          "excitations.0.value=100.0", "simulation.equilibrate=true", 'simulation.duration="20us"'])
+    ds = run_scenario(sc)
+    assert np.hypot(ds["v_x"].values, ds["v_y"].values).max() < 1e-8
+    assert ds.attrs["equilibrium_residual_N"] < 1e-8
+    if solid != "rigid":
+        assert ds["energy_solid"].values[0] > 1e-5  # the solid starts deformed
+    assert np.abs(ds["balance_error"].values).max() < 1e-12
+
+
+def test_a_load_nothing_holds_has_no_equilibrium(tmp_path):
+    """A bead pushed away from the chain, toward nothing: a clear error naming it (exit 2 at load)."""
+    path = chain_scenario(tmp_path)
+    text = path.read_text().replace("direction = [1.0, 0.0]", "direction = [-1.0, 0.0]")
+    path.write_text(text)
+    with pytest.raises(S.ScenarioError, match=r"simulation.equilibrate.*C:1"):
+        S.build_problem(S.load(str(path)))

@@ -212,6 +212,12 @@ def _print_summary(s: dict):
     t.add_row("max balance error", f"{s['max_balance_error_J']:.3e} J ({s['max_balance_error_rel']:.2e} of input)")
     for m, p in s["peak_speed"].items():
         t.add_row(f"peak speed {m}", f"{p['m_per_s']:.4f} m/s ({p['granule']})")
+    eq = s.get("equilibrium")
+    if eq:
+        t.add_row("equilibrium", f"{int(eq['loaded_pairs'])} pairs and {int(eq['loaded_walls'])} wall contacts loaded, "
+                  f"{int(eq['iterations'])} Newton iterations, residual {eq['residual_N']:.1e} N")
+        t.add_row("equilibrium forces", f"largest: pair {eq['max_pair_force_N']:.4g} N, wall {eq['max_wall_force_N']:.4g} N, "
+                  f"solid {eq['max_solid_force_N']:.4g} N; deepest overlap {eq['max_overlap_m']:.3e} m")
     t.add_row("output", s.get("output", ""))
     console.print(t)
 

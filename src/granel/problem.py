@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .coupling.driver import Guards, Schedule
 from .coupling.solver import SolverSettings
 from .granular.system import GranularState, GranularSystem
@@ -22,3 +24,5 @@ class Problem:
     schedule: Schedule
     source: str = ""  # the scenario as TOML
     guards: Guards = Guards()  # the driver's stop rules
+    solid_force0: np.ndarray | None = None  # (nc, 2) the static forces on the solid at t = 0 (a preload)
+    equilibrium: dict | None = None  # the static equilibrium's numbers (granular.static.Equilibrium.summary)

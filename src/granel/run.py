@@ -48,13 +48,16 @@ def make_solver(problem: Problem, sparse: bool | None = None):
             settings = replace(settings, mode_cutoff=min(float(settings.mode_cutoff), top))
         elif solid.ndof:
             modes = all_modes(solid)
-        return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
-                           load_kinks(problem.system))
-    if large:
+        solver = ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
+                             load_kinks(problem.system))
+    elif large:
         from .coupling.sparse import SparseSolver
 
-        return SparseSolver(problem.system, problem.state, solid, settings, per)
-    return ModalSolver(problem.system, problem.state, solid, settings, per, all_modes(solid) if solid.ndof else None)
+        solver = SparseSolver(problem.system, problem.state, solid, settings, per)
+    else:
+        solver = ModalSolver(problem.system, problem.state, solid, settings, per, all_modes(solid) if solid.ndof else None)
+    solver.solid_force0 = problem.solid_force0
+    return solver
 
 
 def reference_scales(problem: Problem) -> tuple[float, float]:
@@ -110,6 +113,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
             "mean_iterations": float(its.mean()) if len(its) else 0.0, "max_iterations_used": int(its.max()) if len(its) else 0}
     attrs = base_attrs(problem.source, info)
     attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
+    attrs.update(problem.equilibrium or {})
     omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
     spec = trajectory_spec(traj, problem.system, solid, attrs, omega)
     return spec.to_dataset() if dataset else spec
@@ -164,6 +168,9 @@ def summarize(ds) -> dict:
     for key in ("solver_mean_iterations", "solver_min_step"):
         if key in ds.attrs:
             out[key[7:]] = float(ds.attrs[key])
+    eq = {k[len("equilibrium_"):]: float(v) for k, v in ds.attrs.items() if k.startswith("equilibrium_")}
+    if eq:
+        out["equilibrium"] = eq
     return out
 
 

@@ -61,6 +61,14 @@ BALANCE_LIMIT = 1e-2
 OUTPUT_BATCH = 64
 
 
+def static_modes(force, P, w2, nc):
+    """The interface forces (nc, 2) and the modes' static displacement eta = W^-2 P' F under a
+    preload `force` (None: none), with P the contacts' modal matrix and w2 the squared frequencies."""
+    F = np.zeros((nc, 2)) if force is None else np.array(force, float).reshape(nc, 2)
+    eta = (P.T @ F.ravel()) / w2 if len(w2) else np.zeros(0)
+    return F, eta
+
+
 class SolverError(RuntimeError):
     """The coupled step failed (no convergence, or a non-finite state); the message says where and why."""
 
@@ -109,10 +117,13 @@ class ModalSolver:
         return self.settings.method
 
     # ------------------------------------------------------------ state
+    solid_force0 = None  # (nc, 2) static forces on the solid at t = 0 (a preload), set by run.make_solver
+
     def start(self) -> None:
         nm, nc = len(self.solid.w2), len(self.system.solid_contacts)
         z = lambda k: np.zeros(k)  # noqa: E731
-        self.st = core.CoupledState(self.y0.copy(), z(nm), z(nm), z(nm), np.zeros((nc, 2)), z(2 * nc), z(2 * nc), z(2 * nc),
+        F0, eta0 = static_modes(self.solid_force0, self.solid.P, self.solid.w2, nc)
+        self.st = core.CoupledState(self.y0.copy(), eta0, z(nm), z(nm), F0, self.solid.P @ eta0, z(2 * nc), z(2 * nc),
                                     z(nc), z(nc), np.zeros(1), np.zeros(3, np.int64))
 
     def save(self) -> dict:
@@ -266,17 +277,27 @@ class ExactSolver:
     def name(self) -> str:
         return "fast"
 
+    solid_force0 = None  # (nc, 2) static forces on the solid at t = 0 (a preload), set by run.make_solver
+
     def start(self) -> None:
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y = self.y0.copy()
         dy = np.zeros_like(y)
-        rhs(0.0, y, dy, self.stepper.model, self.stepper.still, 0.0)
+        F0, eta0 = static_modes(self.solid_force0, self.solid.P, self.solid.omega**2, nc)
+        u0 = self.solid.P @ eta0 if nr else np.zeros(2 * nc)
+        still = self.stepper.still
+        rhs(0.0, y, dy, self.stepper.model, Motion(u0.reshape(nc, 2), still.v0, still.a, still.j, still.d4, still.d5), 0.0)
         level = 0 if not self.settings.adaptive else int(round(4 * np.log2(self.cfg.h_max / self.settings.dt)))
         self.st = exact.initial_state(y, dy, nr, nc, len(self.cache.nodes), 0.0, max(0, min(level, self.cfg.levels)))
+        self.st.eta[:] = eta0
+        self.st.F[:, :] = F0
+        self.st.q[:] = self.solid.P.T @ F0.ravel() if nr else 0.0
+        self.st.u[:] = u0
         self.t_out, self._k = 0.0, 0
-        self._single_batch(0, y, np.zeros(nr), np.zeros(nr), np.zeros((nc, 2)))  # the output at t = 0
+        self._single_batch(0, y, eta0, np.zeros(nr), F0)  # the output at t = 0
         q, n = self._batch["q"], self.system.n
-        ledger = float(q.media[0].sum()) + y[6 * n] + y[6 * n + 1] - y[6 * n + 2]  # E_granular + D - W (13)
+        # E_solid + E_granular + D - W (13)
+        ledger = float(q.solid[0].sum() + q.media[0].sum()) + y[6 * n] + y[6 * n + 1] - y[6 * n + 2]
         self.st.clock[4] = self.st.clock[5] = ledger
 
     def save(self) -> dict:

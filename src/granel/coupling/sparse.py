@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse.linalg import splu
 
 from ..granular.system import GranularState, GranularSystem, Stepper
 from ..solid.base import SolidModel
@@ -73,12 +74,17 @@ class SparseSolver:
         return cache
 
     # ------------------------------------------------------------ state
+    solid_force0 = None  # (nc, 2) static forces on the solid at t = 0 (a preload), set by run.make_solver
+
     def start(self) -> None:
         nc = len(self.frame.tangent)
-        self.sol = self.newmark.initial()
+        F0 = np.zeros((nc, 2)) if self.solid_force0 is None else np.asarray(self.solid_force0, float)
+        BtF = self.Bt @ F0.ravel()
+        x0 = splu(self.model.K.tocsc()).solve(BtF) if np.any(BtF) else None  # at rest under F0
+        self.sol = self.newmark.initial(x0, None, BtF if x0 is not None else None)
         z = np.zeros(nc)
         # the policy reads normal, vrel and ticks from a CoupledState (modal parts empty)
-        self.st = core.CoupledState(self.y0.copy(), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((nc, 2)), np.zeros(2 * nc),
+        self.st = core.CoupledState(self.y0.copy(), np.zeros(0), np.zeros(0), np.zeros(0), F0.copy(), self.B @ self.sol.x,
                                     np.zeros(2 * nc), np.zeros(2 * nc), z, z.copy(), np.zeros(1), np.zeros(3, np.int64))
 
     def save(self) -> dict:

@@ -332,5 +332,32 @@ def build_problem(sc: Scenario) -> Problem:
     built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
     system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
     state = type(state)(state.y.copy(), state.t)
+    solid = build_solid(sc, system)
+    force0, report = None, None
+    if sc.simulation.equilibrate:
+        force0, report = equilibrate(system, state, solid)
     guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state)[1])
-    return Problem(system, state, build_solid(sc, system), solver_settings(sc), schedule(sc), text, guards)
+    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report)
+
+
+def equilibrate(system, state, solid):
+    """Move the granules of `state` (in place) to the static equilibrium of the constant loads
+    (`granular.static`) with the solid's static compliance at its contacts; returns the forces on
+    the solid there (nc, 2) and the equilibrium's numbers. A load that nothing holds is a
+    ScenarioError naming the granule."""
+    from ..granular.static import NoEquilibrium, equilibrium
+    from ..granular.system import Stepper
+
+    C = None
+    if solid.ndof:
+        from scipy.sparse.linalg import splu
+
+        B = solid.contact_map()
+        C = B @ splu(solid.K.tocsc()).solve(B.T.toarray())
+        C = 0.5 * (C + C.T)
+    try:
+        eq = equilibrium(system, Stepper(system).model, C)
+    except NoEquilibrium as err:
+        raise ScenarioError(f"simulation.equilibrate: {err}") from None
+    state.y[: 2 * system.n] = eq.pos.ravel()
+    return eq.solid_forces, eq.summary()
