@@ -169,3 +169,91 @@ def test_a_load_nothing_holds_has_no_equilibrium(tmp_path):
     path.write_text(text)
     with pytest.raises(S.ScenarioError, match=r"simulation.equilibrate.*C:1"):
         S.build_problem(S.load(str(path)))
+
+
+# ---------------------------------------------------------------- analysis on known signals
+
+def test_lock_in_and_harmonics_of_a_known_signal():
+    """Amplitudes at f, 2f, 3f, f/2, f/3 of 0.2 + sin(2 pi f t) + 0.3 cos(4 pi f t + 1) +
+    0.1 sin(pi f t), fitted over whole periods of f/3: the signal's own coefficients (1e-10)."""
+    from granel.analysis.narrowband import harmonic_amplitudes, lock_in
+
+    f = 1e4
+    t = np.linspace(0, 30 / f, 6001)
+    s = 0.2 + np.sin(2 * np.pi * f * t) + 0.3 * np.cos(4 * np.pi * f * t + 1) + 0.1 * np.sin(np.pi * f * t)
+    amps = harmonic_amplitudes(t, s, f)
+    assert amps["f"] == pytest.approx(1.0, abs=1e-10) and amps["2f"] == pytest.approx(0.3, abs=1e-10)
+    assert amps["f/2"] == pytest.approx(0.1, abs=1e-10)
+    assert amps["3f"] < 1e-10 and amps["f/3"] < 1e-10
+    A = lock_in(t, s, [2 * f])[0]  # complex: 0.3 e^(i)
+    assert A.real == pytest.approx(0.3 * math.cos(1.0), abs=1e-10) and A.imag == pytest.approx(0.3 * math.sin(1.0), abs=1e-10)
+
+
+def test_steady_window_and_response_period():
+    """A drive at f with a transient decaying as e^(-t / 0.5 ms) is steady (1 %) once the
+    transient is below about 1 % of the response; a response repeating every two drive periods
+    locks to 2, a plain one to 1, one with an incommensurate part to none (0)."""
+    from granel.analysis.narrowband import response_period, steady_window
+
+    f = 2e4
+    T = 1 / f
+    t = np.linspace(0, 5e-3, 20001)
+    s = np.sin(2 * np.pi * f * t) + 2 * np.exp(-t / 5e-4) * np.sin(2 * np.pi * 1.37 * f * t)
+    lo, hi = steady_window(t, s, T, rtol=1e-2)
+    # the period-to-period change of the transient, about 2 e^(-t/tau) (1 - e^(-T/tau)) (+ its
+    # beat with the drive), is 1 % of the response near t = 2.3e-3 s
+    assert 1.5e-3 < lo < 3.0e-3 and hi == t[-1]
+    assert response_period(t, np.sin(2 * np.pi * f * t), T) == 1
+    assert response_period(t, np.sin(2 * np.pi * f * t) + 0.4 * np.sin(np.pi * f * t), T) == 2
+    assert response_period(t, np.sin(2 * np.pi * f * t) + 0.4 * np.sin(2 * np.pi * f * (np.sqrt(2) - 1) * t), T) == 0
+
+
+# ---------------------------------------------------------------- physics
+
+STEEL = (200e9, 7850.0, 0.3)
+
+
+def hertz_chain_cutoff(F0, R=0.005, E=200e9, rho=7850.0, nu=0.3):
+    """The linear cut-off of a monatomic chain precompressed by F0: f_c = (1/pi) sqrt(K/m),
+    K = 3/2 A^(2/3) F0^(1/3), A = 4/3 E* sqrt(R/2), E* = E / 2(1 - nu^2) (two equal spheres)."""
+    A = 4 / 3 * E / (2 * (1 - nu**2)) * math.sqrt(R / 2)
+    K = 1.5 * A ** (2 / 3) * F0 ** (1 / 3)
+    m = 4 / 3 * math.pi * R**3 * rho
+    return math.sqrt(K / m) / math.pi
+
+
+def driven_chain(tmp_path, n=20, preload=10.0, drive=0.1, frequency=1e4, duration="3ms", alpha_n=0.05):
+    """`chain_scenario` with a harmonic drive on the first bead (5 ramp cycles) on top of the
+    preload, equilibrated, with Tsuji damping alpha_n (to reach a steady state in a few ms)."""
+    extra = f"""[[excitations]]
+granule = "C:1"
+kind = "harmonic"
+amplitude = {drive!r}
+frequency = {frequency!r}
+ramp_cycles = 5
+direction = [1.0, 0.0]
+"""
+    path = chain_scenario(tmp_path, n, preload, extra)
+    text = path.read_text().replace('duration = "20us"', f'duration = "{duration}"\noutput_every = "2us"')
+    path.write_text(text.replace("alpha_n = 0.0", f"alpha_n = {alpha_n!r}"))
+    return S.load(str(path))
+
+
+def test_cutoff_of_a_precompressed_chain(tmp_path):
+    """A chain of 20 steel beads (R = 5 mm) precompressed by 10 N, driven by 0.1 N at its first
+    bead: the force it transmits to the far wall, at the drive frequency in the last 1.5 ms of 3,
+    falls by more than 20 dB between 0.97 and 1.03 of the cut-off (f_c = 17.3 kHz here, from
+    Hertz's law) and passes below it (above -10 dB at 0.8 f_c). Measured: -4.6, -29.1 and
+    -70.0 dB at 0.8, 0.97 and 1.03 f_c."""
+    from granel.analysis.narrowband import harmonic_amplitudes, transmissibility
+
+    fc = hertz_chain_cutoff(10.0)
+    assert fc == pytest.approx(17.3e3, rel=3e-3)
+    db = {}
+    for r in (0.8, 0.97, 1.03):
+        ds = run_scenario(driven_chain(tmp_path, frequency=r * fc))
+        t, F = ds["time"].values, ds["wall_force_normal"].values[:, 0]
+        amp = harmonic_amplitudes(t, F, r * fc, orders=(1,), subharmonics=(), window=(1.5e-3, 3e-3))["f"]
+        db[r] = 20 * math.log10(transmissibility(amp, 0.1))
+    assert db[0.8] > -10.0
+    assert db[0.97] - db[1.03] > 20.0

@@ -62,7 +62,7 @@ def make_solver(problem: Problem, sparse: bool | None = None):
 
 def reference_scales(problem: Problem) -> tuple[float, float]:
     """The velocity and energy scales of the adaptive step's error (`granular.system.load_scales`)."""
-    return load_scales(problem.system, problem.state)
+    return load_scales(problem.system, problem.state, problem.schedule.duration)
 
 
 # the automatic cut-off's most eigenmodes on a solid beyond solid.modal.DENSE_LIMIT DOFs

@@ -1,4 +1,5 @@
-"""Post-processing of result Datasets: reciprocity metrics, modal energies, energy densities.
+"""Post-processing of result Datasets: reciprocity metrics, modal energies, energy densities,
+narrowband measures (steady state, harmonics, lock-in, transmissibility).
 
 Every function takes result Datasets (as written by `granel run`) or plain arrays and returns
 numbers or arrays; nothing here runs a simulation.
@@ -15,3 +16,13 @@ from .modal import (  # noqa: F401
 from .reciprocity import arrival_time, nonreciprocity_index, reciprocity_metrics  # noqa: F401
 from .signals import amplitude_spectrum, dominant_frequency, peak_time, peak_width, zero_crossing_frequency  # noqa: F401
 from .density import beam_energy_density_grid, granule_energy_density, solid_energy_density  # noqa: F401
+from .narrowband import (  # noqa: F401
+    Drive,
+    drive_of,
+    harmonic_amplitudes,
+    lock_in,
+    nonreciprocity_db,
+    response_period,
+    steady_window,
+    transmissibility,
+)

@@ -48,8 +48,8 @@ from numba import njit
 
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope, tanh_friction
-from ..granular.kernels import (friction_rate, granule_energies, interface_forces, moved_beyond, overlaps, rhs, rk4_step,
-                                rk4_substepped, wall_forces)
+from ..granular.kernels import (friction_rate, granule_energies, interface_forces, motion_at, moved_beyond, overlaps, rhs,
+                                rk4_step, rk4_substepped, wall_forces)
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
@@ -950,6 +950,11 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
     lam = np.zeros(nc)
     off = cache.ready.shape[0] - 1
     oy, oeta, oetad, oF = out
+    # outputs the last accepted step already passed (it ended a previous batch beyond its last output)
+    while done[0] < targets.shape[0] and targets[done[0]] <= st.clock[0]:
+        o = done[0]
+        dense_state(st, solid, model, targets[o], DenseOut(oy[o], oeta[o], oetad[o], oF[o]))
+        done[0] += 1
     k = 0
     while done[0] < targets.shape[0]:
         if k >= log.t.shape[0]:
@@ -1097,19 +1102,21 @@ class DenseOut(NamedTuple):
 def dense(step, solid, model, tau, out):
     """The state at tau inside a step: the granules by RK4 from the step's start over tau under the
     step's contact motion (full RK4 accuracy, the step itself unchanged), the modes by their exact
-    response to the step's force polynomial, and the interface force by that polynomial."""
+    response to the step's force polynomial, and the interface force as the contact law gives it
+    there (what the granules feel: the polynomial the solid takes differs from it by its
+    interpolation error inside the step)."""
     out.y[:] = step.y0
     if tau > 0.0:
         rk4_substepped(out.y, step.t0, tau, model, step.motion, step.rate, np.empty((5, out.y.shape[0])))
+    nc = out.F.shape[0]
+    if nc:
+        u, w = np.empty((nc, 2)), np.empty((nc, 2))
+        for c in range(nc):
+            u[c, 0], u[c, 1], w[c, 0], w[c, 1] = motion_at(step.motion, c, tau)
+        iface = interface_buffers(nc)
+        interface_forces(out.y, model, u, w, iface, False)
+        out.F[:, :] = iface.F
     nb, nr = step.Ts.shape[0], step.eta0.shape[0]
-    H, dH = np.empty(nb), np.empty(nb)
-    basis_values(step.Ts, tau, H, dH)
-    for c in range(out.F.shape[0]):
-        for d in range(2):
-            acc = 0.0
-            for b in range(nb):
-                acc += H[b] * step.Fs[b, c, d]
-            out.F[c, d] = acc
     hom, wd, wv = np.empty((nr, 3)), np.empty((nr, nb)), np.empty((nr, nb))
     weights_at(solid.omega, tau, step.Ts, hom, wd, wv)
     for i in range(nr):

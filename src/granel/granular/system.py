@@ -289,17 +289,30 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
-def load_scales(system: GranularSystem, state: GranularState) -> tuple[float, float]:
-    """A run's velocity and energy scales: the largest speed a load can give its granule (peak
-    impulse / mass) and the kinetic energy that carries, or those of the initial motion; 1 m/s
-    and 1 J if neither is bounded (constant loads alone)."""
-    speeds = [(e.history.peak_impulse() / system.mass[e.granule], system.mass[e.granule]) for e in system.excitations]
+def load_scales(system: GranularSystem, state: GranularState, duration: float = 0.0) -> tuple[float, float]:
+    """A run of `duration` seconds: its velocity and energy scales. The velocity: the largest speed
+    a load can give its granule (peak impulse / mass), or the initial motion's. The energy: the
+    kinetic energy that speed carries, or, for a drive (harmonic, chirp), the work its amplitude
+    does at that speed over the time it drives, A v D / 2, which over many cycles is what flows
+    through the system; 1 m/s and 1 J if nothing is bounded (constant loads alone)."""
+    scales = []
+    for e in system.excitations:
+        m, h = system.mass[e.granule], e.history
+        v = h.peak_impulse() / m
+        if not (np.isfinite(v) and v > 0):
+            continue
+        energy = 0.5 * m * v * v
+        if h.kind in ("harmonic", "chirp") and duration > 0:
+            driving = max(0.0, min(h.params[3], duration - h.params[2]))
+            energy = max(energy, 0.5 * abs(h.params[0]) * v * driving)
+        scales.append((v, energy))
     v = np.abs(state.vel)
-    speeds += [(float(np.hypot(*state.vel[g])), system.mass[g]) for g in np.flatnonzero(v.max(axis=1) > 0)] if v.size else []
-    finite = [(sp, m) for sp, m in speeds if np.isfinite(sp) and sp > 0]
-    if not finite:
+    for g in (np.flatnonzero(v.max(axis=1) > 0) if v.size else []):
+        sp = float(np.hypot(*state.vel[g]))
+        scales.append((sp, 0.5 * system.mass[g] * sp * sp))
+    if not scales:
         return 1.0, 1.0
-    return max(sp for sp, _ in finite), max(0.5 * m * sp * sp for sp, m in finite)
+    return max(s for s, _ in scales), max(e for _, e in scales)
 
 
 def load_bundle(excitations: list[Excitation]) -> Loads:

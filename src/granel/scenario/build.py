@@ -336,7 +336,7 @@ def build_problem(sc: Scenario) -> Problem:
     force0, report = None, None
     if sc.simulation.equilibrate:
         force0, report = equilibrate(system, state, solid)
-    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state)[1])
+    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state, sc.simulation.duration)[1])
     return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report)
 
 
