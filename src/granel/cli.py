@@ -520,6 +520,110 @@ def sweep(
               "a rerun retries them", 3)
 
 
+@app.command()
+def spectrum(
+    scenario: str = typer.Argument(..., help="scenario TOML or built-in name (its first excitation becomes the drive)"),
+    drive: str = typer.Option(..., help="the driven granule, MEDIUM:LABEL (forward direction)"),
+    measure: str = typer.Option(..., help="the measured granule, MEDIUM:LABEL"),
+    frequencies: str = typer.Option(..., help="START:STOP:COUNT (geometric; --linear for even steps) or a list, "
+                                              "e.g. 1kHz:40kHz:20 or 2kHz,5kHz"),
+    amplitudes: str = typer.Option(..., help="force amplitudes [N], e.g. 10,100,1000"),
+    both_directions: bool = typer.Option(False, "--both-directions", help="also drive MEASURE and measure DRIVE: "
+                                                                          "the nonreciprocity"),
+    linear: bool = typer.Option(False, "--linear", help="evenly spaced frequencies in START:STOP:COUNT"),
+    cycles: float = typer.Option(40.0, help="drive periods per run"),
+    window_cycles: float = typer.Option(10.0, help="the last periods analysed"),
+    ramp_cycles: float = typer.Option(5.0, help="periods of the drive's smooth ramp-up"),
+    samples: int = typer.Option(24, help="outputs per drive period"),
+    set_: list[str] = typer.Option([], "--set", help="scenario override field=value (repeatable)"),
+    out: Path = typer.Option(Path("spectrum.nc"), "-o", "--out", help="the spectrum NetCDF; its figure (.png), report "
+                                                                      "(.md) and cases (.cases/) go beside it"),
+    workers: int = typer.Option(2, help="LocalCluster worker processes (ignored with --scheduler)"),
+    scheduler: Optional[str] = typer.Option(None, help="address of a running dask scheduler, e.g. tcp://host:8786"),
+):
+    """Transmission and nonreciprocity over drive frequency and amplitude: one harmonic run per
+    frequency, amplitude and direction, on the sweep engine (re-running the same command reuses
+    finished runs). Writes OUT (frequency x amplitude x direction), OUT.png and OUT.md.
+    Exit code 3 if any run failed."""
+    from pydantic import ValidationError
+
+    from .paths import OutputPathError, check_folder_path, check_result_path
+    from .results import atomic_path, write_netcdf
+    from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, plot_spectrum, spectrum_report, \
+        spectrum_dataset
+    from .sweep import SchedulerError, SweepSpec, check_spectrum, run_spec
+
+    if workers < 1:
+        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    try:
+        freqs = parse_frequencies(frequencies, linear)
+    except ValueError as e:
+        _fail(f"--frequencies {frequencies}: {e}")
+    try:
+        amps = parse_amplitudes(amplitudes)
+    except ValueError as e:
+        _fail(f"--amplitudes {amplitudes}: {e}")
+    source = Path(scenario)
+    if scenario not in S.builtin_names() and not source.exists():
+        _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
+    base = scenario if scenario in S.builtin_names() else str(source.resolve())
+    try:
+        spec = SweepSpec.model_validate({
+            "name": f"spectrum of {source.stem if scenario not in S.builtin_names() else scenario}", "base": base,
+            "overrides": list(set_), "mode": "spectrum",
+            "spectrum": {"drive": drive, "measure": measure, "both_directions": both_directions, "cycles": cycles,
+                         "window_cycles": window_cycles, "ramp_cycles": ramp_cycles, "samples_per_period": samples},
+            "axes": [{"field": FREQUENCY_FIELD, "values": freqs}, {"field": AMPLITUDE_FIELD, "values": amps}]})
+    except ValidationError as e:
+        _fail(S._format_validation_error(e).replace("invalid scenario", "invalid option").replace("spectrum.", "--")
+              .replace("samples_per_period", "samples").replace("_", "-"))
+    if out.suffix != ".nc":
+        _fail(f"-o {out}: give a NetCDF file name ending in .nc")
+    work = out.with_suffix(".cases")
+    try:
+        check_result_path(out, "-o", inputs=(source,))
+        check_folder_path(work, "-o (its .cases folder)")
+    except OutputPathError as e:
+        _fail(str(e), e.code)
+    try:
+        check_spectrum(spec, Path("."))
+    except S.ScenarioError as e:
+        _fail(str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure"))
+    n = len(freqs) * len(amps)
+    failed = []
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+        task = bar.add_task(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", total=n)
+
+        def progress(r):
+            if r.get("status") != "ok":
+                failed.append(r)
+            bar.update(task, advance=1)
+
+        try:
+            summary = run_spec(spec, Path("."), work, workers, scheduler, progress)
+        except SchedulerError as e:
+            _fail(f"--scheduler {scheduler}: {e}", e.code)
+        except S.ScenarioError as e:
+            _fail(f"{scenario}: {e}")
+        except OSError as e:
+            _fail(f"-o {out}: cannot write the spectrum's runs in {work} ({e})", 4)
+    ds = spectrum_dataset(summary, spec.spectrum)
+    try:
+        write_netcdf(ds, out)
+        figure = plot_spectrum(ds, out.with_suffix(".png"))
+        with atomic_path(out.with_suffix(".md")) as tmp:
+            Path(tmp).write_text(spectrum_report(ds))
+    except OSError as e:
+        _fail(f"-o {out}: cannot write the spectrum ({e})", 4)
+    console.print(spectrum_report(ds))
+    console.print(f"wrote {out}, {figure}, {out.with_suffix('.md')} (runs in {work})")
+    for r in failed:
+        console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
+    if failed:
+        _fail(f"{len(failed)} of {n} cases failed (listed above); a rerun retries them", 3)
+
+
 @app.command("map")
 def map_(
     summary: Path = typer.Argument(..., help="a sweep's summary.nc"),

@@ -44,6 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from . import __version__
 from . import scenario as S
+from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
@@ -143,8 +144,9 @@ class SweepSpec(BaseModel):
     description: str = ""
     base: str = "paper"
     overrides: list[str] = Field(default_factory=list)
-    mode: Literal["reciprocity", "run"] = "reciprocity"
+    mode: Literal["reciprocity", "run", "spectrum"] = "reciprocity"
     pair: tuple[str, str] = ("LSGM:3", "SSGM:C")
+    spectrum: SpectrumSpec | None = None
     axes: list[AxisSpec] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -152,6 +154,12 @@ class SweepSpec(BaseModel):
         dims = [a.dim for a in self.axes]
         if len(set(dims)) != len(dims):
             raise ValueError(f"axis names must be unique, got {dims}")
+        if (self.mode == "spectrum") != (self.spectrum is not None):
+            raise ValueError("mode = \"spectrum\" needs a [spectrum] table (drive, measure, ...), and only that mode takes one")
+        if self.mode == "spectrum":
+            fields = {f for a in self.axes for f in ([a.field] if a.zip is None else list(a.zip))}
+            if FREQUENCY_FIELD not in fields:
+                raise ValueError(f"a spectrum needs an axis on {FREQUENCY_FIELD}")
         n = 1
         for a in self.axes:
             n *= a.size
@@ -221,6 +229,27 @@ def check_base(spec: SweepSpec, base_dir: Path) -> None:
     S.apply_overrides(raw, list(spec.overrides))
 
 
+def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
+    """Fail early (ScenarioError naming `drive` or `measure`) when a spectrum's granules are not
+    in the base scenario, or both directions would drive the same granule; builds the first
+    case's granular systems, which also checks their scenarios."""
+    from .scenario.build import build_granular
+
+    sp = spec.spectrum
+    if sp.both_directions and sp.drive == sp.measure:
+        raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: the same granule as spectrum.drive; both directions "
+                              "need two granules")
+    first = cases(spec)[0]
+    for (_, sc), (_, driven, _) in zip(case_scenarios(spec, base_dir, first), sp.runs()):
+        try:
+            build_granular(sc, sc.base)
+        except S.ScenarioError as e:
+            if "excitations.0.granule" in str(e):
+                which = "drive" if driven == sp.drive else "measure"
+                raise S.ScenarioError(f"spectrum.{which} = {driven!r}: no such granule in {spec.base}") from None
+            raise
+
+
 def case_fingerprint(spec: SweepSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
     """What a case's cached result depends on: the full scenario text of each of its runs (with
     every solver setting of its [simulation] table), the sweep's and the case's overrides, the
@@ -230,6 +259,7 @@ def case_fingerprint(spec: SweepSpec, scenarios: list[tuple[str, S.Scenario]], c
         "metric_rules": METRIC_RULES,
         "mode": spec.mode,
         "pair": list(spec.pair),
+        "spectrum": spec.spectrum.model_dump() if spec.spectrum is not None else None,
         "sweep_overrides": list(spec.overrides),
         "case_overrides": case["overrides"],
         "scenarios": {key: S.to_toml(sc) for key, sc in scenarios},
@@ -270,6 +300,11 @@ def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[st
     base = _base_path(spec, base_dir)
     if spec.mode == "run":
         return [("run", S.load(base, ov))]
+    if spec.mode == "spectrum":
+        f = float(case["overrides"][FREQUENCY_FIELD])
+        if not (np.isfinite(f) and f > 0):
+            raise S.ScenarioError(f"{FREQUENCY_FIELD}: a drive frequency must be positive, got {f!r}")
+        return [(d, S.load(base, ov + spec.spectrum.overrides(f, driven))) for d, driven, _ in spec.spectrum.runs()]
     a, b = spec.pair
     out = []
     for exc in (b, a):  # forward: shock on b measured at a; backward: the reverse
@@ -308,7 +343,9 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
                 ds = run_scenario(sc)
                 write_netcdf(ds, path)
             runs[key] = ds
-        if spec.mode == "reciprocity":
+        if spec.mode == "spectrum":
+            res["metrics"] = case_metrics(runs, spec.spectrum)
+        elif spec.mode == "reciprocity":
             a, b = spec.pair
             m = reciprocity_metrics(runs[f"shock-{b.replace(':', '')}"], runs[f"shock-{a.replace(':', '')}"])
             f, k = m["forward"], m["backward"]
@@ -401,17 +438,24 @@ def _connect(scheduler: str, timeout: float):
 
 def run_sweep(path, out_dir, workers: int = 2, scheduler: str | None = None, progress=None,
               timeout: float = 60.0) -> xr.Dataset:
-    """Run every case on dask.distributed (a LocalCluster of `workers` >= 1 processes, or the
-    scheduler at `scheduler`, which must have a worker within `timeout` seconds); reuses cases
-    already finished in out_dir (see `run_case`). A case whose task fails (e.g. its worker dies)
-    is recorded as failed; an OSError (out_dir not writable) propagates."""
+    """Run the sweep file at `path` (`run_spec`)."""
+    spec, base_dir = load_sweep(path)
+    return run_spec(spec, base_dir, out_dir, workers, scheduler, progress, timeout)
+
+
+def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, scheduler: str | None = None, progress=None,
+             timeout: float = 60.0) -> xr.Dataset:
+    """Run every case of `spec` (its base read relative to `base_dir`) on dask.distributed (a
+    LocalCluster of `workers` >= 1 processes, or the scheduler at `scheduler`, which must have a
+    worker within `timeout` seconds); reuses cases already finished in out_dir (see `run_case`).
+    A case whose task fails (e.g. its worker dies) is recorded as failed; an OSError (out_dir not
+    writable) propagates. Writes out_dir/summary.nc and returns it."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .results import write_netcdf
 
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
-    spec, base_dir = load_sweep(path)
     check_base(spec, base_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

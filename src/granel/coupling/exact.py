@@ -46,10 +46,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
+from ..granular.bundles import ACC_WORK, InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope, tanh_friction
-from ..granular.kernels import (friction_rate, granule_energies, interface_forces, motion_at, moved_beyond, overlaps, rhs,
-                                rk4_step, rk4_substepped, wall_forces)
+from ..granular.kernels import (friction_rate, granule_energies, interface_forces, load_value, motion_at, moved_beyond,
+                                overlaps, rhs, rk4_step, rk4_substepped, wall_forces)
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
@@ -67,6 +67,9 @@ LEDGER_CLIP = 1.0
 LEDGER_ACCEPT = 2.0
 ORDER = 4.5  # a step's ledger part goes as h^5 over a share as h^(1/2)
 LEDGER_NOISE = 4.0  # a defect within this many times the iteration's noise (`_iteration_noise`) passes
+# ... or within the ledger's round-off (`contact_roundoff`): a preloaded chain stores far more elastic
+# energy than a small drive moves, and no step can close the ledger below its rounding
+LEDGER_ROUNDOFF = 2.220446049250313e-16
 FORCE_NODES = {"quadratic": (0.0, 0.5, 1.0), "linear": (0.0, 1.0)}
 
 
@@ -135,7 +138,7 @@ class ExactState(NamedTuple):
     data Fs (nb, nc, 2) at the nodes (Fs[-1] is F) with their projections qs (nb, nr) and basis Ts
     (nb, 4), and the contacts' motion over it. clock = [t, t0, the controller's running mean square
     of the ledger part, friction rate of the last step, energy ledger (13), its initial value, the
-    controller's continuous level];
+    controller's continuous level, the largest |input work| so far (`ledger_bound`)];
     meta = [grid level of the next step, rejected]."""
 
     y: np.ndarray
@@ -164,7 +167,7 @@ def initial_state(y, dy, nr: int, nc: int, nb: int, ledger: float, level: int) -
     z, zc = (lambda k: np.zeros(k)), (lambda: np.zeros((nc, 2)))  # noqa: E731
     return ExactState(y, dy, z(nr), z(nr), zc(), z(nr), z(2 * nc), z(2 * nc), z(nc), z(nc), y.copy(), z(nr), z(nr),
                       np.zeros((nb, nc, 2)), np.zeros((nb, nr)), np.zeros((nb, 4)), Motion(zc(), zc(), zc(), zc(), zc(), zc()),
-                      np.array([0.0, 0.0, 0.0, 0.0, ledger, ledger, float(level)]), np.array([level, 0], np.int64))
+                      np.array([0.0, 0.0, 0.0, 0.0, ledger, ledger, float(level), 0.0]), np.array([level, 0], np.int64))
 
 
 class Work(NamedTuple):
@@ -217,7 +220,8 @@ class Work(NamedTuple):
     lB: np.ndarray
     lr: np.ndarray
     lJ: np.ndarray
-    noise: np.ndarray  # (1,): the converged forces' work uncertainty over the step (`_iteration_noise`)
+    noise: np.ndarray  # (2,): the converged forces' work uncertainty over the step (`_iteration_noise`), the
+    # ledger's round-off (`trial_ledger`)
 
 
 @njit(cache=True)
@@ -233,7 +237,7 @@ def work_for(y, nc, nr, nb):
                 np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
                 np.zeros((n, n)), v(n),
                 np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), v(2 * nn), v(nn), v(nn), v(nn),
-                v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)), v(1))
+                v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)), v(2))
 
 
 @njit(cache=True, inline="always")
@@ -784,7 +788,47 @@ def trial_ledger(st, solid, cache, slot, model, w):
         w.eta1[i] = e
         w.etad1[i] = v
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
-    return es + granular_ledger(w.ytr, model, w.un[nn - 1].reshape(m2 // 2, 2))
+    kin, rot, pot = granule_energies(w.ytr, model, w.un[nn - 1].reshape(m2 // 2, 2))
+    n = kin.shape[0]
+    eg = kin.sum() + rot.sum() + pot.sum()
+    spent = w.ytr[6 * n] + w.ytr[6 * n + 1]
+    work = w.ytr[6 * n + 2]
+    w.noise[1] = LEDGER_ROUNDOFF * (es + eg + abs(spent) + abs(work))
+    return es + eg + spent - work
+
+
+@njit(cache=True)
+def contact_roundoff(y, dy, model, su, t):
+    """The rounding of the contacts' potential energy in the ledger (13), in two parts. Each
+    overlap is a difference of lengths of the size of the radii, rounded to LEDGER_ROUNDOFF of
+    that, which its force A delta^(3/2) turns into energy. And rounding granule i's position
+    (LEDGER_ROUNDOFF of its coordinates) changes its contacts' energy by the net contact force on
+    it, m a minus the loads (dy holds a, at the step's start), times that. Under a static preload
+    these are far above the energies' own rounding: ten steel beads (R = 5 mm) pressed by 10 N
+    round their ledger by up to about 1e-17 J a step (measured), 7e-17 J by this estimate."""
+    gr = model.granules
+    radius = gr.radius
+    n = radius.shape[0]
+    V = 3 * n
+    pairs, walls, points, loads = model.pairs, model.walls, model.points, model.loads
+    dp, dw, ds = overlaps(y, model, su)
+    sq = 0.0  # the contacts' roundings are independent: they add in quadrature
+    for c in range(dp.shape[0]):
+        if dp[c] > 0.0:
+            sq += (pairs.A[c] * dp[c] * math.sqrt(dp[c]) * (radius[pairs.i[c]] + radius[pairs.j[c]])) ** 2
+    for c in range(dw.shape[0]):
+        if dw[c] > 0.0:
+            sq += (walls.A[c] * dw[c] * math.sqrt(dw[c]) * radius[walls.g[c]]) ** 2
+    for c in range(ds.shape[0]):
+        if ds[c] > 0.0:
+            sq += (points.A[c] * ds[c] * math.sqrt(ds[c]) * radius[points.g[c]]) ** 2
+    total = math.sqrt(sq)
+    for i in range(n):
+        total += gr.mass[i] * math.hypot(dy[V + 2 * i], dy[V + 2 * i + 1]) * max(abs(y[2 * i]), abs(y[2 * i + 1]))
+    for e in range(loads.g.shape[0]):
+        i = loads.g[e]
+        total += abs(load_value(loads, e, t)) * max(abs(y[2 * i]), abs(y[2 * i + 1]))
+    return LEDGER_ROUNDOFF * total
 
 
 @njit(cache=True)
@@ -808,14 +852,14 @@ def state_ledger(y, eta, etad, solid, model):
 
 
 @njit(cache=True)
-def step_error(w, cfg, granules, t, h, defect, drift):
+def step_error(w, cfg, granules, t, h, defect, drift, tol):
     """The parts of the scaled local error of the coupled step from t to t + h, in w.parts: [0] the
     largest embedded RK4 error of a granule's velocity or spin velocity R omega against
     atol + rtol v_ref; [1] the step's defect of the energy ledger (13) against its share of the
-    run's bound (`ledger_share`), the ledger having drifted by `drift` so far; [2] the drift after
-    the step against the bound tol = ledger_tol e_ref. A defect within LEDGER_NOISE times what the
-    converged iteration leaves open (`_iteration_noise`) passes both: tighter steps would not
-    close it. True if the step is accepted: [0] <= 1, [1] <= LEDGER_ACCEPT, [2] <= 1."""
+    run's bound tol (`ledger_bound`, `ledger_share`), the ledger having drifted by `drift` so far;
+    [2] the drift after the step against tol. A defect within LEDGER_NOISE times what the
+    converged iteration leaves open (`_iteration_noise`), or within the ledger's round-off
+    (LEDGER_ROUNDOFF of its terms), passes both: tighter steps would not close it. True if the step is accepted: [0] <= 1, [1] <= LEDGER_ACCEPT, [2] <= 1."""
     radius = granules.radius
     n = radius.shape[0]
     V = 3 * n
@@ -824,9 +868,11 @@ def step_error(w, cfg, granules, t, h, defect, drift):
     for i in range(n):
         ev = max(ev, abs(w.err[V + 2 * i]), abs(w.err[V + 2 * i + 1]), radius[i] * abs(w.err[OM + i]))
     w.parts[0] = ev / (cfg.atol + cfg.rtol * cfg.v_ref)
-    noise = LEDGER_NOISE * w.noise[0]  # no step is asked to close the ledger below the iteration's own floor
-    w.parts[1] = abs(defect) / max(ledger_share(cfg, t, h, drift), noise, 1e-300)
-    w.parts[2] = max(abs(drift + defect) - noise, 0.0) / (cfg.ledger_tol * cfg.e_ref)
+    # no step is asked to close the ledger below the iteration's own floor, nor below its round-off
+    noise = max(LEDGER_NOISE * w.noise[0], w.noise[1])
+    w.parts[1] = abs(defect) / max(ledger_share(cfg, t, h, drift, tol), noise, 1e-300)
+    # a defect within the floor cannot be made smaller, whatever the drift: only a larger one counts
+    w.parts[2] = max(abs(drift + defect) - noise, 0.0) / tol if abs(defect) > noise else 0.0
     return w.parts[0] <= 1.0 and w.parts[1] <= LEDGER_ACCEPT and w.parts[2] <= 1.0
 
 
@@ -886,16 +932,25 @@ def friction_slopes(st, law, cache, slot, frame, lam):
 
 
 @njit(cache=True, inline="always")
-def ledger_share(cfg, t, h, drift):
+def ledger_bound(cfg, st):
+    """The run's bound on the energy ledger (13): ledger_tol times the larger of the energy scale
+    e_ref (the loads' and initial motion's, known before the run) and the largest |input work| so
+    far. The second counts the energy the loads actually move, which e_ref cannot foresee: a
+    small drive on a preloaded chain makes the preload exchange F0 x with the contacts, far more
+    than the drive's own work, and a bound below that exchange's round-off would stall the steps."""
+    return cfg.ledger_tol * max(cfg.e_ref, st.clock[7])
+
+
+@njit(cache=True)
+def ledger_share(cfg, t, h, drift, tol):
     """What a step of size h from time t may add to the energy ledger (13), which has drifted by
-    `drift` so far, tol = ledger_tol e_ref being the run's bound: its random-walk share
+    `drift` so far, tol being the run's bound (`ledger_bound`): its random-walk share
     tol sqrt(h / T) while the drift is small (fading out as the drift reaches tol / 2), or the
     room left spread evenly over the time left, (tol - |drift|) h / (T - t), whichever is larger.
     The defects, RK4's and the interface's local energy errors, are fifth order and mostly of
     either sign (they cancel over a collision), so they add up like a random walk, whose spread
     over the run is tol when every step spends its share; where they keep one sign, the drift
     grows and the even spread of the room left takes over, so the drift never passes tol."""
-    tol = cfg.ledger_tol * cfg.e_ref
     room = max(tol - abs(drift), 0.0)
     walk = tol * math.sqrt(h / cfg.duration) * max(0.0, 1.0 - 2.0 * abs(drift) / tol)
     return max(walk, room * h / max(cfg.duration - t, h))
@@ -917,14 +972,16 @@ def control_error(w, st, h):
     """The scaled error the controller aims at 1 after an accepted step of size h: the velocity
     part, the ledger's random-walk part as the running mean square of the last steps' parts (the
     defect's size swings within a collision: one step's value is a poor guide to the next), each
-    clipped at LEDGER_CLIP and rescaled to h, over LEDGER_RMS, and twice the room part (a step
-    spends at most half the room left). Updates the running mean square in st.clock[2]."""
+    clipped at LEDGER_CLIP and rescaled to h, over LEDGER_RMS (the room left, once the drift has
+    used the random walk's share, is in that part through `ledger_share`; the drift itself is
+    past and no step size undoes it, so it only rejects steps, `step_error`). Updates the
+    running mean square in st.clock[2]."""
     hp = st.clock[0] - st.clock[1]
     r2 = min(w.parts[1], LEDGER_CLIP) ** 2
     if hp > 0.0 and st.clock[2] > 0.0:
         r2 = (1.0 - LEDGER_FILTER) * st.clock[2] * (h / hp) ** (2.0 * ORDER) + LEDGER_FILTER * r2
     st.clock[2] = r2
-    return max(w.parts[0], math.sqrt(r2) / LEDGER_RMS, 2.0 * w.parts[2])
+    return max(w.parts[0], math.sqrt(r2) / LEDGER_RMS)
 
 
 @njit(cache=True, inline="always")
@@ -978,7 +1035,9 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
                 continue
             return status, k
         ledger = trial_ledger(st, solid, cache, slot, model, w)
-        ok = step_error(w, cfg, model.granules, t, h, ledger - st.clock[4], st.clock[4] - st.clock[5])
+        tol = ledger_bound(cfg, st)
+        w.noise[1] = max(w.noise[1], contact_roundoff(w.ytr, st.dy, model, w.un[nb - 2].reshape(nc, 2), t + h))
+        ok = step_error(w, cfg, model.granules, t, h, ledger - st.clock[4], st.clock[4] - st.clock[5], tol)
         # the outputs this step reaches, by dense output from its start (the last one may be its end)
         filled = 0
         worst_dense = 0.0
@@ -994,7 +1053,9 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
             else:
                 dense(trial_step(st, cache, slot, w), solid, model, tau, DenseOut(oy[o], oeta[o], oetad[o], oF[o]))
                 defect = state_ledger(oy[o], oeta[o], oetad[o], solid, model) - st.clock[4]
-                worst_dense = max(worst_dense, abs(st.clock[4] - st.clock[5] + defect) / (cfg.ledger_tol * cfg.e_ref))
+                floor = max(LEDGER_NOISE * w.noise[0], w.noise[1])
+                if abs(defect) > floor:
+                    worst_dense = max(worst_dense, (abs(st.clock[4] - st.clock[5] + defect) - floor) / tol)
             filled += 1
         if cfg.adaptive and (not ok or worst_dense > 1.0) and level < cfg.levels:
             worst = max(w.parts[0], w.parts[1] / LEDGER_ACCEPT, w.parts[2], worst_dense)
@@ -1002,10 +1063,11 @@ def advance_outputs(st, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
             st.meta[0] = grid_level(st.clock[6])
             st.meta[1] += 1
             continue
-        if abs(ledger - st.clock[5]) > cfg.ledger_limit:
+        if abs(ledger - st.clock[5]) > cfg.ledger_limit * max(1.0, st.clock[7] / cfg.e_ref):
             return core.BALANCE_LOST, k  # even the smallest step lost the energy balance (13)
         ectl = control_error(w, st, h)  # before the clock moves: it rescales from the last step
         accept(st, cache, slot, h, w, w.rate[0], ledger)
+        st.clock[7] = max(st.clock[7], abs(st.y[6 * n + ACC_WORK]))
         done[0] += filled
         friction_slopes(st, model.law, cache, slot, solid.frame, lam)
         log.t[k] = st.clock[0]

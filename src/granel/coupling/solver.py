@@ -311,6 +311,8 @@ class ExactSolver:
         motion = Motion(*[np.array(arrays[f"motion:{k}"]) for k in Motion._fields])
         self.st = exact.ExactState(*[motion if k == "step_motion" else np.array(arrays[f"st:{k}"])
                                            for k in exact.ExactState._fields])
+        if len(self.st.clock) < 8:  # an older checkpoint: no running work scale yet
+            self.st = self.st._replace(clock=np.append(self.st.clock, np.zeros(8 - len(self.st.clock))))
         self.stepper.refresh(arrays["ref_pos"])
         self.t_out = float(arrays["t_out"])
         self._k, self._batch = int(round(self.t_out / self._target(1))), None

@@ -1,0 +1,323 @@
+"""Frequency-resolved transmission and nonreciprocity: the `spectrum` mode of the sweep engine
+and the `granel spectrum` command's inputs and outputs.
+
+Each case drives one granule harmonically (the scenario's first excitation made a harmonic at the
+case's frequency and amplitude, ramped up over `ramp_cycles`) for `cycles` drive periods, sampled
+`samples_per_period` times a period, and measures over the last `window_cycles` periods:
+
+    mobility          |V_B(f)| / F        the measured granule's velocity amplitude at the drive
+                                          frequency, along its own drive direction, per newton
+    transmissibility  |V_B(f)| / |V_A(f)| over the driven granule's velocity amplitude
+    solid_force       |F_solid(f)| / F    the force the solid takes at f over the drive's
+    harmonic2, 3      |V_B(kf)| / |V_B(f)|, subharmonic2 |V_B(f/2)| / |V_B(f)|
+    period            the response's period in drive periods (1, 2, ...; 0: none within 8)
+    steady            1 if the window's periods repeat within 2 %, else 0
+    balance           max |energy balance (13)| / max input work
+
+Both directions (drive A measure B, then drive B measure A) give the nonreciprocity
+20 log10(mobility_fwd / mobility_bwd) [dB]. Mobility is the measure a linear elastic system keeps
+equal both ways (the reciprocity theorem, with each granule's drive direction as its measuring
+direction), so a linear, reciprocal system reads 0 dB.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+
+import numpy as np
+import xarray as xr
+from pydantic import BaseModel, ConfigDict, Field
+
+FREQUENCY_FIELD = "excitations.0.frequency"
+AMPLITUDE_FIELD = "excitations.0.amplitude"
+DIRECTIONS = ("fwd", "bwd")
+PER_DIRECTION = ("mobility", "transmissibility", "drive_velocity", "measured_velocity", "solid_force", "harmonic2",
+                 "harmonic3", "subharmonic2", "period", "steady", "balance")
+# the response repeats within this (RMS over RMS) from period to period in a steady window
+STEADY_RTOL = 2e-2
+
+
+class SpectrumSpec(BaseModel):
+    """The `[spectrum]` table of a sweep in spectrum mode."""
+
+    model_config = ConfigDict(extra="forbid")
+    drive: str = Field(min_length=1, description="the driven granule, MEDIUM:LABEL")
+    measure: str = Field(min_length=1, description="the measured granule, MEDIUM:LABEL")
+    both_directions: bool = True
+    cycles: float = Field(40.0, gt=0, description="drive periods per run")
+    window_cycles: float = Field(10.0, gt=0, description="the last periods analysed")
+    ramp_cycles: float = Field(5.0, ge=0, description="periods of the drive's smooth ramp-up")
+    samples_per_period: int = Field(24, ge=8, le=1000, description="outputs per drive period")
+
+    def model_post_init(self, _):
+        if self.window_cycles + self.ramp_cycles > self.cycles:
+            raise ValueError(f"window_cycles ({self.window_cycles:g}) + ramp_cycles ({self.ramp_cycles:g}) exceed cycles "
+                             f"({self.cycles:g}): the window would include the ramp")
+
+    def runs(self) -> list[tuple[str, str, str]]:
+        """(direction, driven granule, measured granule) of each run of a case."""
+        out = [("fwd", self.drive, self.measure)]
+        if self.both_directions:
+            out.append(("bwd", self.measure, self.drive))
+        return out
+
+    def overrides(self, frequency: float, driven: str) -> list[str]:
+        """The scenario overrides of one run at `frequency` driving `driven`."""
+        return ['excitations.0.kind="harmonic"', f'excitations.0.granule="{driven}"', "excitations.0.t0=0.0",
+                f"excitations.0.ramp_cycles={self.ramp_cycles!r}",
+                f"simulation.duration={self.cycles / frequency!r}",
+                f"simulation.output_every={1.0 / (frequency * self.samples_per_period)!r}"]
+
+
+# ---------------------------------------------------------------- command-line values
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_HZ = {"hz": 1.0, "khz": 1e3, "mhz": 1e6}
+
+
+def parse_frequency(text: str) -> float:
+    """'2kHz' -> 2000.0; '1.5e4' -> 15000.0 (bare numbers are hertz)."""
+    m = re.fullmatch(rf"\s*({_NUM})\s*([a-zA-Z]*)\s*", text)
+    unit = m.group(2).lower() if m else None
+    if not m or (unit and unit not in _HZ):
+        raise ValueError(f"not a frequency: {text!r} (use e.g. 2kHz, 500Hz, 1.5e4)")
+    f = float(m.group(1)) * _HZ.get(unit or "hz")
+    if not (math.isfinite(f) and f > 0):
+        raise ValueError(f"not a positive frequency: {text!r}")
+    return f
+
+
+def parse_frequencies(text: str, linear: bool = False) -> list[float]:
+    """'1kHz:40kHz:20' -> 20 frequencies from 1 to 40 kHz, geometric (linear if `linear`);
+    '2kHz,5kHz,10kHz' -> those."""
+    text = text.strip()
+    if ":" in text:
+        parts = text.split(":")
+        if len(parts) != 3:
+            raise ValueError(f"{text!r}: give START:STOP:COUNT, e.g. 1kHz:40kHz:20")
+        a, b = parse_frequency(parts[0]), parse_frequency(parts[1])
+        try:
+            n = int(parts[2])
+        except ValueError:
+            raise ValueError(f"{text!r}: COUNT must be a whole number, got {parts[2]!r}") from None
+        if n < 1:
+            raise ValueError(f"{text!r}: COUNT must be at least 1")
+        vals = np.linspace(a, b, n) if linear else np.geomspace(a, b, n)
+        return [float(v) for v in vals]
+    vals = [parse_frequency(p) for p in text.split(",") if p.strip()]
+    if not vals:
+        raise ValueError("no frequency given")
+    return vals
+
+
+def parse_amplitudes(text: str) -> list[float]:
+    """'10,100,1000' or '10N,100N' -> force amplitudes [N], each positive and finite."""
+    out = []
+    for p in (q.strip() for q in text.split(",")):
+        if not p:
+            continue
+        m = re.fullmatch(rf"({_NUM})\s*(N?)", p)
+        v = float(m.group(1)) if m else float("nan")
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"not a positive force amplitude: {p!r} (use e.g. 10,100 or 10N)")
+        out.append(v)
+    if not out:
+        raise ValueError("no amplitude given")
+    return out
+
+
+# ---------------------------------------------------------------- one run's measures
+
+def measuring_direction(sc: dict, label: str) -> np.ndarray:
+    """The unit direction along which granule `label` is measured: the direction the scenario's
+    first excitation would push it (`toward_solid` resolved for its medium, or the vector)."""
+    from .analysis.reciprocity import toward_solid
+
+    d = sc["excitations"][0].get("direction", "toward_solid")
+    if isinstance(d, str):
+        return toward_solid(sc, label) * (1.0 if d == "toward_solid" else -1.0)
+    v = np.asarray(d, float)
+    return v / np.hypot(*v)
+
+
+def run_measures(ds, measured: str, window_cycles: float) -> dict:
+    """The measures of one harmonically driven run (module docstring) at granule `measured`."""
+    from .analysis.narrowband import drive_of, harmonic_amplitudes, response_period, steady_window
+
+    sc = tomllib.loads(ds.attrs["scenario"])
+    drive = drive_of(ds)
+    f, F = drive.frequency, abs(drive.amplitude)
+    T = 1.0 / f
+    t = ds["time"].values
+    labels = list(ds["granule"].values)
+
+    def along(label):
+        d = measuring_direction(sc, label)
+        g = labels.index(label)
+        return ds["v_x"].values[:, g] * d[0] + ds["v_y"].values[:, g] * d[1]
+
+    hi = t[-1]
+    window = (hi - window_cycles * T, hi)
+    vb = along(measured)
+    amps = harmonic_amplitudes(t, vb, f, orders=(1, 2, 3), subharmonics=(2,), window=window)
+    va = harmonic_amplitudes(t, along(drive.granule), f, orders=(1,), subharmonics=(), window=window)["f"]
+    if "contact_force_normal" in ds and ds.sizes.get("contact", 0):
+        fs = harmonic_amplitudes(t, ds["contact_force_normal"].values.sum(axis=1), f, orders=(1,), subharmonics=(),
+                                 window=window)["f"]
+    else:
+        fs = 0.0
+    steady = steady_window(t[t >= window[0] - 1e-12 * hi], vb[t >= window[0] - 1e-12 * hi], T, rtol=STEADY_RTOL, periods=2)
+    scale = np.abs(ds["input_work"].values).max()
+    v1 = amps["f"]
+    return {
+        "mobility": v1 / F,
+        "transmissibility": v1 / va if va > 0 else float("nan"),
+        "drive_velocity": va,
+        "measured_velocity": v1,
+        "solid_force": fs / F,
+        "harmonic2": amps["2f"] / v1 if v1 > 0 else float("nan"),
+        "harmonic3": amps["3f"] / v1 if v1 > 0 else float("nan"),
+        "subharmonic2": amps["f/2"] / v1 if v1 > 0 else float("nan"),
+        "period": float(response_period(t, vb, T, window=window)),
+        "steady": float(steady is not None and steady[0] <= window[0] + 1e-9 * T),
+        "balance": float(np.abs(ds["balance_error"].values).max() / scale) if scale > 0 else float("nan"),
+    }
+
+
+def case_metrics(runs: dict, spec: SpectrumSpec) -> dict:
+    """A case's metrics: each run's measures suffixed by its direction, and the nonreciprocity."""
+    out = {}
+    for direction, _, measured in spec.runs():
+        for k, v in run_measures(runs[direction], measured, spec.window_cycles).items():
+            out[f"{k}_{direction}"] = float(v)
+    if spec.both_directions:
+        out["nonreciprocity_db"] = float(20.0 * np.log10(out["mobility_fwd"] / out["mobility_bwd"])) \
+            if out["mobility_fwd"] > 0 and out["mobility_bwd"] > 0 else float("nan")
+    return out
+
+
+# ---------------------------------------------------------------- the spectrum Dataset
+
+def spectrum_dataset(summary: xr.Dataset, spec: SpectrumSpec) -> xr.Dataset:
+    """A spectrum sweep's summary with `frequency` and `amplitude` as dimensions (renamed from the
+    axes on excitations.0.frequency / amplitude) and a `direction` dimension (fwd, bwd) for the
+    per-run measures; nonreciprocity_db, status and any other axis as they are."""
+    ren = {k: v for k, v in (("excitations_0_frequency", "frequency"), ("excitations_0_amplitude", "amplitude"))
+           if k in summary.dims}
+    s = summary.rename(ren)
+    dirs = [d for d, _, _ in spec.runs()]
+    out = xr.Dataset(coords={k: v for k, v in s.coords.items()})
+    out = out.assign_coords(direction=("direction", dirs))
+    for name in PER_DIRECTION:
+        parts = [s[f"{name}_{d}"] if f"{name}_{d}" in s else xr.full_like(s["status"], np.nan, dtype=float) for d in dirs]
+        out[name] = xr.concat(parts, dim="direction").assign_coords(direction=dirs)
+    for name in ("nonreciprocity_db", "status"):
+        if name in s:
+            out[name] = s[name]
+    units = {"frequency": "Hz", "amplitude": "N", "mobility": "m/(N s)", "drive_velocity": "m/s", "measured_velocity": "m/s",
+             "nonreciprocity_db": "dB"}
+    for k, u in units.items():
+        if k in out.variables:
+            out[k].attrs["units"] = u
+    out["direction"].attrs["long_name"] = (f"fwd: drive {spec.drive}, measure {spec.measure}; "
+                                           f"bwd: drive {spec.measure}, measure {spec.drive}")
+    out.attrs.update({k: v for k, v in summary.attrs.items()})
+    out.attrs["drive"], out.attrs["measure"] = spec.drive, spec.measure
+    return out
+
+
+def _curves(ds: xr.Dataset):
+    """(frequency, amplitude values, a selection of the other axes at their first index)."""
+    rest = {d: 0 for d in ds["mobility"].dims if d not in ("frequency", "amplitude", "direction")}
+    return ds.isel(rest) if rest else ds, rest
+
+
+def plot_spectrum(ds: xr.Dataset, output):
+    """Mobility over frequency per amplitude (fwd solid, bwd dashed) and the nonreciprocity
+    [dB] over frequency per amplitude, plus a map over frequency x amplitude when there are
+    several amplitudes; any other sweep axis at its first value."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .plots import save
+
+    sub, rest = _curves(ds)
+    f = sub["frequency"].values / 1e3
+    amps = sub["amplitude"].values if "amplitude" in sub.dims else [None]
+    has_map = "nonreciprocity_db" in sub and "amplitude" in sub.dims and len(amps) > 2
+    fig, axes = plt.subplots(1, 3 if has_map else 2, figsize=(15 if has_map else 10, 4.2), squeeze=False)
+    ax1, ax2 = axes[0, 0], axes[0, 1]
+    colors = plt.cm.viridis(np.linspace(0.0, 0.85, len(amps)))
+    for c, a in zip(colors, amps):
+        one = sub.sel(amplitude=a) if a is not None else sub
+        for d, style in zip(one["direction"].values, ("-", "--")):
+            ax1.loglog(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3,
+                       label=f"{a:g} N, {d}" if a is not None else d)
+        if "nonreciprocity_db" in one:
+            ax2.semilogx(f, one["nonreciprocity_db"].values, "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
+    ax1.set_xlabel("drive frequency [kHz]")
+    ax1.set_ylabel("mobility |V(f)| / F [m/(N s)]")
+    ax1.set_title(f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}", fontsize=9)
+    ax1.legend(fontsize=7)
+    ax2.axhline(0.0, color="0.6", lw=0.8)
+    ax2.set_xlabel("drive frequency [kHz]")
+    ax2.set_ylabel("nonreciprocity 20 log10(fwd / bwd) [dB]")
+    if len(amps) > 1 or amps[0] is not None:
+        ax2.legend(fontsize=7)
+    if has_map:
+        m = axes[0, 2].pcolormesh(f, amps, sub["nonreciprocity_db"].transpose("amplitude", "frequency").values,
+                                  shading="nearest", cmap="RdBu_r",
+                                  vmin=-np.nanmax(np.abs(sub["nonreciprocity_db"].values)),
+                                  vmax=np.nanmax(np.abs(sub["nonreciprocity_db"].values)))
+        axes[0, 2].set_xscale("log")
+        axes[0, 2].set_yscale("log")
+        axes[0, 2].set_xlabel("drive frequency [kHz]")
+        axes[0, 2].set_ylabel("drive amplitude [N]")
+        fig.colorbar(m, ax=axes[0, 2], label="nonreciprocity [dB]")
+    if rest:
+        fig.suptitle(", ".join(f"{k} = {ds[k].values[0]}" for k in rest), fontsize=9)
+    fig.tight_layout()
+    return save(fig, output)
+
+
+def spectrum_report(ds: xr.Dataset) -> str:
+    """A short Markdown report: what was driven and measured, and per amplitude the strongest
+    nonreciprocity, the band where the forward mobility stays within 20 dB of its peak, and how
+    many runs were steady or failed."""
+    sub, rest = _curves(ds)
+    f = sub["frequency"].values
+    lines = [f"# Spectrum: {ds.attrs.get('name', '')}", "",
+             f"Drive {ds.attrs.get('drive')} (fwd) and {ds.attrs.get('measure')} (bwd), harmonic force, "
+             f"{len(f)} frequencies from {f.min() / 1e3:.3g} to {f.max() / 1e3:.3g} kHz.", ""]
+    if rest:
+        lines += [f"Other axes at their first value: {', '.join(f'{k} = {ds[k].values[0]}' for k in rest)}.", ""]
+    lines += ["| amplitude [N] | strongest nonreciprocity [dB] | at [kHz] | fwd pass band (within 20 dB of peak) [kHz] "
+              "| steady runs | failed cases |", "|---|---|---|---|---|---|"]
+    amps = sub["amplitude"].values if "amplitude" in sub.dims else [None]
+    for a in amps:
+        one = sub.sel(amplitude=a) if a is not None else sub
+        nr = one["nonreciprocity_db"].values if "nonreciprocity_db" in one else np.full(len(f), np.nan)
+        if np.isfinite(nr).any():
+            k = int(np.nanargmax(np.abs(nr)))
+            strongest, at = f"{nr[k]:+.2f}", f"{f[k] / 1e3:.3g}"
+        else:
+            strongest, at = "n/a", "n/a"
+        mob = one["mobility"].sel(direction="fwd").values
+        band = "n/a"
+        if np.isfinite(mob).any() and np.nanmax(mob) > 0:
+            ok = f[mob >= np.nanmax(mob) * 0.1]
+            band = f"{ok.min() / 1e3:.3g} - {ok.max() / 1e3:.3g}"
+        steady = one["steady"].values
+        failed = int(np.sum(one["status"].values != "ok")) if "status" in one else 0
+        lines.append(f"| {a if a is None else f'{a:g}'} | {strongest} | {at} | {band} | "
+                     f"{int(np.nansum(steady))} of {steady.size} | {failed} |")
+    bal = np.nanmax(ds["balance"].values) if np.isfinite(ds["balance"].values).any() else float("nan")
+    lines += ["", f"Largest energy-balance error (13) of any run, over its input work: {bal:.2e}.", "",
+              "Mobility |V(f)| / F: the measured granule's velocity amplitude at the drive frequency, along its own "
+              "drive direction, per newton of drive. A linear reciprocal system has equal mobilities both ways "
+              "(0 dB). A run is steady when its last periods repeat within 2 %."]
+    return "\n".join(lines) + "\n"
