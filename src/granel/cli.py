@@ -579,16 +579,16 @@ def spectrum(
               .replace("samples_per_period", "samples").replace("_", "-"))
     if out.suffix != ".nc":
         _fail(f"-o {out}: give a NetCDF file name ending in .nc")
+    try:
+        check_spectrum(spec, Path("."))
+    except S.ScenarioError as e:
+        _fail(str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure"))
     work = out.with_suffix(".cases")
     try:
         check_result_path(out, "-o", inputs=(source,))
         check_folder_path(work, "-o (its .cases folder)")
     except OutputPathError as e:
         _fail(str(e), e.code)
-    try:
-        check_spectrum(spec, Path("."))
-    except S.ScenarioError as e:
-        _fail(str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure"))
     n = len(freqs) * len(amps)
     failed = []
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),

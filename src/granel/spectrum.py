@@ -37,6 +37,9 @@ PER_DIRECTION = ("mobility", "transmissibility", "drive_velocity", "measured_vel
                  "harmonic3", "subharmonic2", "period", "steady", "balance")
 # the response repeats within this (RMS over RMS) from period to period in a steady window
 STEADY_RTOL = 2e-2
+# a nonreciprocity is read where both mobilities are within this factor of the largest at that
+# amplitude (40 dB): far below it, in a stop band, they are at the run's floor of transients
+RESOLVED = 1e-2
 
 
 class SpectrumSpec(BaseModel):
@@ -228,6 +231,14 @@ def spectrum_dataset(summary: xr.Dataset, spec: SpectrumSpec) -> xr.Dataset:
     return out
 
 
+def resolved(one: xr.Dataset) -> np.ndarray:
+    """Over frequency, at one amplitude: where both directions' mobilities are at least RESOLVED
+    of the largest (the nonreciprocity is a measure there, not the ratio of two floors)."""
+    mob = one["mobility"].transpose("direction", ...).values
+    top = np.nanmax(mob) if np.isfinite(mob).any() else np.nan
+    return np.all(mob >= RESOLVED * top, axis=0)
+
+
 def _curves(ds: xr.Dataset):
     """(frequency, amplitude values, a selection of the other axes at their first index)."""
     rest = {d: 0 for d in ds["mobility"].dims if d not in ("frequency", "amplitude", "direction")}
@@ -239,6 +250,7 @@ def plot_spectrum(ds: xr.Dataset, output):
     [dB] over frequency per amplitude, plus a map over frequency x amplitude when there are
     several amplitudes; any other sweep axis at its first value."""
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -258,7 +270,9 @@ def plot_spectrum(ds: xr.Dataset, output):
             ax1.loglog(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3,
                        label=f"{a:g} N, {d}" if a is not None else d)
         if "nonreciprocity_db" in one:
-            ax2.semilogx(f, one["nonreciprocity_db"].values, "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
+            nr, ok = one["nonreciprocity_db"].values, resolved(one)
+            ax2.semilogx(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
+            ax2.semilogx(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
     ax1.set_xlabel("drive frequency [kHz]")
     ax1.set_ylabel("mobility |V(f)| / F [m/(N s)]")
     ax1.set_title(f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}", fontsize=9)
@@ -266,6 +280,10 @@ def plot_spectrum(ds: xr.Dataset, output):
     ax2.axhline(0.0, color="0.6", lw=0.8)
     ax2.set_xlabel("drive frequency [kHz]")
     ax2.set_ylabel("nonreciprocity 20 log10(fwd / bwd) [dB]")
+    ax2.set_title("open symbols: a mobility 40 dB below its peak (stop band)", fontsize=8)
+    for ax in (ax1, ax2):
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     if len(amps) > 1 or amps[0] is not None:
         ax2.legend(fontsize=7)
     if has_map:
@@ -295,12 +313,13 @@ def spectrum_report(ds: xr.Dataset) -> str:
              f"{len(f)} frequencies from {f.min() / 1e3:.3g} to {f.max() / 1e3:.3g} kHz.", ""]
     if rest:
         lines += [f"Other axes at their first value: {', '.join(f'{k} = {ds[k].values[0]}' for k in rest)}.", ""]
-    lines += ["| amplitude [N] | strongest nonreciprocity [dB] | at [kHz] | fwd pass band (within 20 dB of peak) [kHz] "
+    lines += ["| amplitude [N] | strongest nonreciprocity [dB] (mobilities within 40 dB of peak) | at [kHz] | fwd pass band (within 20 dB of peak) [kHz] "
               "| steady runs | failed cases |", "|---|---|---|---|---|---|"]
     amps = sub["amplitude"].values if "amplitude" in sub.dims else [None]
     for a in amps:
         one = sub.sel(amplitude=a) if a is not None else sub
         nr = one["nonreciprocity_db"].values if "nonreciprocity_db" in one else np.full(len(f), np.nan)
+        nr = np.where(resolved(one), nr, np.nan)
         if np.isfinite(nr).any():
             k = int(np.nanargmax(np.abs(nr)))
             strongest, at = f"{nr[k]:+.2f}", f"{f[k] / 1e3:.3g}"

@@ -240,11 +240,14 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
         raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: the same granule as spectrum.drive; both directions "
                               "need two granules")
     first = cases(spec)[0]
-    for (_, sc), (_, driven, _) in zip(case_scenarios(spec, base_dir, first), sp.runs()):
+    ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in first["overrides"].items()]
+    f = float(first["overrides"][FREQUENCY_FIELD])
+    for _, driven, _ in sp.runs():
         try:
+            sc = S.load(_base_path(spec, base_dir), ov + sp.overrides(f, driven))
             build_granular(sc, sc.base)
         except S.ScenarioError as e:
-            if "excitations.0.granule" in str(e):
+            if "excitations.0.granule" in str(e) and "no such granule" in str(e):
                 which = "drive" if driven == sp.drive else "measure"
                 raise S.ScenarioError(f"spectrum.{which} = {driven!r}: no such granule in {spec.base}") from None
             raise
