@@ -515,6 +515,19 @@ def sweep(
     for r in failed:
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
+    if spec.mode == "spectrum":
+        from .results import atomic_path, write_netcdf
+        from .spectrum import plot_spectrum, spectrum_dataset, spectrum_report
+
+        sds = spectrum_dataset(ds, spec.spectrum)
+        try:
+            write_netcdf(sds, out / "spectrum.nc")
+            plot_spectrum(sds, out / "spectrum.png")
+            with atomic_path(out / "spectrum.md") as tmp:
+                Path(tmp).write_text(spectrum_report(sds))
+        except OSError as e:
+            _fail(f"--out {out}: cannot write the spectrum ({e})", 4)
+        console.print(f"spectrum: {out / 'spectrum.nc'}, {out / 'spectrum.png'}, {out / 'spectrum.md'}")
     if failed:
         _fail(f"{len(failed)} of {n} cases failed (listed above; their status is in {out / 'summary.nc'}); "
               "a rerun retries them", 3)

@@ -267,12 +267,12 @@ def plot_spectrum(ds: xr.Dataset, output):
     for c, a in zip(colors, amps):
         one = sub.sel(amplitude=a) if a is not None else sub
         for d, style in zip(one["direction"].values, ("-", "--")):
-            ax1.loglog(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3,
+            ax1.plot(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3,
                        label=f"{a:g} N, {d}" if a is not None else d)
         if "nonreciprocity_db" in one:
             nr, ok = one["nonreciprocity_db"].values, resolved(one)
-            ax2.semilogx(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
-            ax2.semilogx(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
+            ax2.plot(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
+            ax2.plot(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
     ax1.set_xlabel("drive frequency [kHz]")
     ax1.set_ylabel("mobility |V(f)| / F [m/(N s)]")
     ax1.set_title(f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}", fontsize=9)
@@ -281,7 +281,10 @@ def plot_spectrum(ds: xr.Dataset, output):
     ax2.set_xlabel("drive frequency [kHz]")
     ax2.set_ylabel("nonreciprocity 20 log10(fwd / bwd) [dB]")
     ax2.set_title("open symbols: a mobility 40 dB below its peak (stop band)", fontsize=8)
-    for ax in (ax1, ax2):
+    ax1.set_yscale("log")
+    wide = f.max() > 5 * f.min()  # a log frequency axis over wide ranges only
+    for ax in [ax1, ax2] + ([axes[0, 2]] if has_map else []):
+        ax.set_xscale("log" if wide else "linear")
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     if len(amps) > 1 or amps[0] is not None:
@@ -291,8 +294,10 @@ def plot_spectrum(ds: xr.Dataset, output):
                                   shading="nearest", cmap="RdBu_r",
                                   vmin=-np.nanmax(np.abs(sub["nonreciprocity_db"].values)),
                                   vmax=np.nanmax(np.abs(sub["nonreciprocity_db"].values)))
-        axes[0, 2].set_xscale("log")
-        axes[0, 2].set_yscale("log")
+        if max(amps) > 5 * min(amps):
+            axes[0, 2].set_yscale("log")
+        axes[0, 2].set_yticks(amps, [f"{a:g}" for a in amps])
+        axes[0, 2].yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axes[0, 2].set_xlabel("drive frequency [kHz]")
         axes[0, 2].set_ylabel("drive amplitude [N]")
         fig.colorbar(m, ax=axes[0, 2], label="nonreciprocity [dB]")
