@@ -516,15 +516,10 @@ def sweep(
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
     if spec.mode == "spectrum":
-        from .results import atomic_path, write_netcdf
-        from .spectrum import plot_spectrum, spectrum_dataset, spectrum_report
+        from .spectrum import write_spectrum
 
-        sds = spectrum_dataset(ds, spec.spectrum)
         try:
-            write_netcdf(sds, out / "spectrum.nc")
-            plot_spectrum(sds, out / "spectrum.png")
-            with atomic_path(out / "spectrum.md") as tmp:
-                Path(tmp).write_text(spectrum_report(sds))
+            write_spectrum(ds, spec.spectrum, out / "spectrum.nc")
         except OSError as e:
             _fail(f"--out {out}: cannot write the spectrum ({e})", 4)
         console.print(f"spectrum: {out / 'spectrum.nc'}, {out / 'spectrum.png'}, {out / 'spectrum.md'}")
@@ -561,9 +556,7 @@ def spectrum(
     from pydantic import ValidationError
 
     from .paths import OutputPathError, check_folder_path, check_result_path
-    from .results import atomic_path, write_netcdf
-    from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, plot_spectrum, spectrum_report, \
-        spectrum_dataset
+    from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
     from .sweep import SchedulerError, SweepSpec, check_spectrum, run_spec
 
     if workers < 1:
@@ -621,16 +614,12 @@ def spectrum(
             _fail(f"{scenario}: {e}")
         except OSError as e:
             _fail(f"-o {out}: cannot write the spectrum's runs in {work} ({e})", 4)
-    ds = spectrum_dataset(summary, spec.spectrum)
     try:
-        write_netcdf(ds, out)
-        figure = plot_spectrum(ds, out.with_suffix(".png"))
-        with atomic_path(out.with_suffix(".md")) as tmp:
-            Path(tmp).write_text(spectrum_report(ds))
+        ds = write_spectrum(summary, spec.spectrum, out)
     except OSError as e:
         _fail(f"-o {out}: cannot write the spectrum ({e})", 4)
     console.print(spectrum_report(ds))
-    console.print(f"wrote {out}, {figure}, {out.with_suffix('.md')} (runs in {work})")
+    console.print(f"wrote {out}, {out.with_suffix('.png')}, {out.with_suffix('.md')} (runs in {work})")
     for r in failed:
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     if failed:

@@ -231,3 +231,51 @@ def force_value(kind: int, params: np.ndarray, times: np.ndarray, values: np.nda
             return amp * ramp(s, params[5] / f, dur) * math.sin(2.0 * math.pi * f * s + params[4])
         return amp * ramp(s, params[5] / f, dur) * math.sin(chirp_phase(s, f, params[4], dur, params[6] > 0.5))
     return float(params[0])
+
+
+@dataclass(frozen=True)
+class WallDrive:
+    """A rigid wall moved along its normal (into the granular side positive) as a shaker would:
+    s(t) = amplitude r(tau) sin(2 pi f tau + phase), tau = t - t0, for 0 <= tau <= duration (the
+    wall at rest before and after), r the drives' ramp (`ramp`, up and down)."""
+
+    amplitude: float
+    frequency: float
+    t0: float = 0.0
+    duration: float = math.inf
+    phase: float = 0.0
+    ramp_cycles: float = 0.0
+
+    def params(self) -> tuple[float, ...]:
+        """The compiled kernels' layout (`kernels.wall_motion`)."""
+        return (float(self.amplitude), float(self.frequency), float(self.t0), float(self.duration), float(self.phase),
+                float(self.ramp_cycles))
+
+    def __call__(self, t: float) -> tuple[float, float]:
+        """(s, ds/dt) at time t [m, m/s]."""
+        tau = t - self.t0
+        if not (0.0 <= tau <= self.duration):
+            return 0.0, 0.0
+        w = 2.0 * math.pi * self.frequency
+        t_ramp = self.ramp_cycles / self.frequency
+        r, dr = 1.0, 0.0
+        if t_ramp > 0:
+            up = tau <= self.duration - tau
+            x = (tau if up else self.duration - tau) / t_ramp
+            if x < 1.0:
+                r = 0.5 * (1.0 - math.cos(math.pi * x))
+                dr = 0.5 * math.pi / t_ramp * math.sin(math.pi * x) * (1.0 if up else -1.0)
+        arg = w * tau + self.phase
+        return self.amplitude * r * math.sin(arg), self.amplitude * (dr * math.sin(arg) + r * w * math.cos(arg))
+
+    def kinks(self) -> list[float]:
+        """Where the motion is not smooth: its start and end, and the ends of its ramps."""
+        out = [self.t0, self.t0 + self.duration]
+        if self.ramp_cycles > 0:
+            out += [self.t0 + self.ramp_cycles / self.frequency, self.t0 + self.duration - self.ramp_cycles / self.frequency]
+        return [t for t in out if math.isfinite(t)]
+
+    def peak_speed(self) -> float:
+        """An upper bound of |ds/dt| [m/s]: 2 pi f A (1 + 1 / (2 ramp_cycles) while ramping)."""
+        extra = 0.5 / self.ramp_cycles if self.ramp_cycles > 0 else 0.0
+        return 2.0 * math.pi * self.frequency * abs(self.amplitude) * (1.0 + extra)

@@ -94,8 +94,9 @@ def auto_mode_cutoff(system, v_ref: float, rtol: float) -> float:
 
 
 def load_kinks(system) -> list[float]:
-    """Times where a load's history is not smooth: a step never crosses them."""
-    return [t for e in system.excitations for t in e.history.kinks()]
+    """Times where a load's history or a wall's motion is not smooth: a step never crosses them."""
+    return [t for e in system.excitations for t in e.history.kinks()] + \
+        [t for w in system.walls if w.drive is not None for t in w.drive.kinks()]
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,

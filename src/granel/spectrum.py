@@ -345,3 +345,21 @@ def spectrum_report(ds: xr.Dataset) -> str:
               "drive direction, per newton of drive. A linear reciprocal system has equal mobilities both ways "
               "(0 dB). A run is steady when its last periods repeat within 2 %."]
     return "\n".join(lines) + "\n"
+
+
+def write_spectrum(summary: xr.Dataset, spec: SpectrumSpec, path) -> xr.Dataset:
+    """A spectrum sweep's outputs beside each other, each written atomically: PATH (.nc, the
+    `spectrum_dataset`), its figure (.png) and its report (.md). Returns the Dataset."""
+    from pathlib import Path
+
+    from .results import atomic_path, write_netcdf
+
+    path = Path(path)
+    ds = spectrum_dataset(summary, spec)
+    write_netcdf(ds, path)
+    with atomic_path(path.with_suffix(".png")) as tmp:
+        plot_spectrum(ds, Path(tmp).with_suffix(".png"))
+        Path(tmp).with_suffix(".png").replace(tmp)
+    with atomic_path(path.with_suffix(".md")) as tmp:
+        Path(tmp).write_text(spectrum_report(ds))
+    return ds

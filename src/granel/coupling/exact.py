@@ -1094,10 +1094,11 @@ class OutputQuantities(NamedTuple):
 
 
 @njit(cache=True)
-def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
+def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q, times):
     """Per output o of a batch: each medium's energy (11) in q.media[o], the solid's kinetic and
     potential energy, the contacts' displacement, the deepest overlap (eq. 2) over the smaller
-    radius with its kind (0 pair, 1 wall, 2 solid) and index, and the force on each wall."""
+    radius with its kind (0 pair, 1 wall, 2 solid) and index, and the force on each wall (at the
+    outputs' `times`, for moving walls)."""
     nc = solid.P.shape[0] // 2
     radius = model.granules.radius
     pairs, walls, points = model.pairs, model.walls, model.points
@@ -1132,7 +1133,7 @@ def output_quantities(oy, oeta, oetad, model, solid, medium, n_media, q):
         q.overlap[o] = best
         q.where[o, 0] = kind
         q.where[o, 1] = idx
-        wall_forces(oy[o], model, q.walls[o])
+        wall_forces(oy[o], model, q.walls[o], times[o])
 
 
 class StepData(NamedTuple):

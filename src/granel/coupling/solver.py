@@ -372,8 +372,9 @@ class ExactSolver:
         q = exact.OutputQuantities(np.zeros((K, len(self.system.media))), np.zeros((K, 2)), np.zeros((K, nc, 2)), np.zeros(K),
                                    np.zeros((K, 2), np.int64), np.zeros((K, len(self.system.walls), 2)))
         if n:
+            times = np.array([self._target(k0 + j) for j in range(n)])
             exact.output_quantities(out[0][:n], out[1][:n], out[2][:n], self.stepper.model, self.solid,
-                                    self.system.medium_index, len(self.system.media), q)
+                                    self.system.medium_index, len(self.system.media), q, times)
         self._batch = {"k0": k0, "done": n, "out": out, "q": q, "error": error, "model": self.stepper.model}
 
     def _single_batch(self, k: int, y, eta, etad, F) -> None:

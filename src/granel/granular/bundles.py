@@ -57,6 +57,7 @@ class Walls(NamedTuple):
     tangent: np.ndarray  # (nw, 2) unit vector from p0 to p1
     length: np.ndarray  # (nw,)
     normal: np.ndarray  # (nw, 2) unit normal into the granular side
+    drive: np.ndarray  # (nw, 6) a moving wall's `excitation.WallDrive.params` (frequency 0: at rest)
 
 
 class Points(NamedTuple):

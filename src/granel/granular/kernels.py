@@ -107,6 +107,28 @@ def _ramp(s, t_ramp, duration):
 
 
 @njit(cache=True, inline="always")
+def wall_motion(walls, w, t):
+    """(s, ds/dt): wall w's displacement along its normal at time t and its speed, 0 for a wall
+    at rest; `excitation.WallDrive` has the formula and its Python twin."""
+    par = walls.drive[w]
+    f = par[1]
+    tau = t - par[2]
+    if f <= 0.0 or tau < 0.0 or tau > par[3]:
+        return 0.0, 0.0
+    om = 2.0 * math.pi * f
+    t_ramp = par[5] / f
+    r, dr = 1.0, 0.0
+    if t_ramp > 0.0:
+        up = tau <= par[3] - tau
+        x = (tau if up else par[3] - tau) / t_ramp
+        if x < 1.0:
+            r = 0.5 * (1.0 - math.cos(math.pi * x))
+            dr = 0.5 * math.pi / t_ramp * math.sin(math.pi * x) * (1.0 if up else -1.0)
+    arg = om * tau + par[4]
+    return par[0] * r * math.sin(arg), par[0] * (dr * math.sin(arg) + r * om * math.cos(arg))
+
+
+@njit(cache=True, inline="always")
 def load_value(loads, e, t):
     """F(t) of applied load e: half-sine (fmax, tau, t0), burst (amp, f, t0, cycles), table
     (linear interpolation, zero outside), constant, harmonic (amp, f, t0, duration, phase,
@@ -202,9 +224,23 @@ def rhs(t, y, dy, model, motion, tau):
         p_visc += gam * ddelta * ddelta
         p_fric -= ft * vt
     walls = model.walls
+    p_in = 0.0
     for c in range(walls.g.shape[0]):  # granule-rigid wall
         i = walls.g[c]
         w = walls.w[c]
+        if walls.drive[w, 1] > 0.0:  # a moving wall: its contact is an external force, its power input work
+            sw, vw = wall_motion(walls, w, t)
+            delta = wall_overlap(y, i, w, radius, walls) + sw
+            if delta <= 0.0:
+                continue
+            nx, ny = walls.normal[w, 0], walls.normal[w, 1]
+            fx, fy, tq, _, _ = one_sided_force(y, radius, i, -nx, -ny, delta, y[V + 2 * i] - vw * nx,
+                                               y[V + 2 * i + 1] - vw * ny, walls.A[c], walls.G[c], law)
+            dy[V + 2 * i] += fx
+            dy[V + 2 * i + 1] += fy
+            dy[OM + i] += tq
+            p_in += fx * y[V + 2 * i] + fy * y[V + 2 * i + 1] + tq * y[OM + i]
+            continue
         delta = wall_overlap(y, i, w, radius, walls)
         if delta <= 0.0:
             continue
@@ -224,7 +260,6 @@ def rhs(t, y, dy, model, motion, tau):
         p_visc += pv
         p_fric += pf
     loads = model.loads
-    p_in = 0.0
     for e in range(loads.g.shape[0]):  # applied forces
         i = loads.g[e]
         f = load_value(loads, e, t)
@@ -381,8 +416,8 @@ def granule_energies(y, model, su):
             e = 0.5 * hertz_potential(model.pairs.A[c], dp[c])
             pot[model.pairs.i[c]] += e
             pot[model.pairs.j[c]] += e
-    for c in range(dw.shape[0]):
-        if dw[c] > 0.0:
+    for c in range(dw.shape[0]):  # (a moving wall's contact is a load: its work is input work, `rhs`)
+        if dw[c] > 0.0 and model.walls.drive[model.walls.w[c], 1] <= 0.0:
             pot[model.walls.g[c]] += hertz_potential(model.walls.A[c], dw[c])
     for c in range(ds.shape[0]):
         if ds[c] > 0.0:
@@ -391,9 +426,10 @@ def granule_energies(y, model, su):
 
 
 @njit(cache=True)
-def wall_forces(y, model, out):
-    """The force each rigid wall takes from the granules (out (nw, 2), x and y), the opposite of
-    the wall contacts' forces on the granules (`one_sided_force`, as in `rhs`)."""
+def wall_forces(y, model, out, t):
+    """The force each rigid wall takes from the granules at time t (out (nw, 2), x and y), the
+    opposite of the wall contacts' forces on the granules (`one_sided_force`, as in `rhs`, a
+    moving wall where `wall_motion` puts it)."""
     radius = model.granules.radius
     n = radius.shape[0]
     walls = model.walls
@@ -401,11 +437,13 @@ def wall_forces(y, model, out):
     for c in range(walls.g.shape[0]):
         i = walls.g[c]
         w = walls.w[c]
-        delta = wall_overlap(y, i, w, radius, walls)
+        sw, vw = wall_motion(walls, w, t)
+        delta = wall_overlap(y, i, w, radius, walls) + sw
         if delta <= 0.0:
             continue
-        fx, fy, _, _, _ = one_sided_force(y, radius, i, -walls.normal[w, 0], -walls.normal[w, 1], delta, y[3 * n + 2 * i],
-                                          y[3 * n + 2 * i + 1], walls.A[c], walls.G[c], model.law)
+        nx, ny = walls.normal[w, 0], walls.normal[w, 1]
+        fx, fy, _, _, _ = one_sided_force(y, radius, i, -nx, -ny, delta, y[3 * n + 2 * i] - vw * nx,
+                                          y[3 * n + 2 * i + 1] - vw * ny, walls.A[c], walls.G[c], model.law)
         out[w, 0] -= fx
         out[w, 1] -= fy
 

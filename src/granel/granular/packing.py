@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..excitation import WallDrive
 from ..materials import Material
 
 
@@ -26,6 +27,7 @@ class Wall:
     normal: tuple[float, float]
     medium: str = ""  # "" = touches granules of every medium
     name: str = ""
+    drive: WallDrive | None = None  # a shaker: the wall moves along its normal (excitation.WallDrive)
 
 
 @dataclass

@@ -204,11 +204,15 @@ def initial_state(system: GranularSystem, velocities=None, spins=None) -> Granul
 
 
 def wall_geometry(walls: list[Wall], media: list[str]):
-    """(p0, unit tangent, length, unit normal, medium index or -1) arrays of the walls."""
+    """(p0, unit tangent, length, unit normal, medium index or -1, drive) arrays of the walls;
+    drive (nw, 6) holds a moving wall's `WallDrive.params` (zeros for a wall at rest)."""
     nw = len(walls)
     p0, tan, length, nrm = np.zeros((nw, 2)), np.zeros((nw, 2)), np.zeros(nw), np.zeros((nw, 2))
     medium = np.full(nw, -1, dtype=np.int64)
+    drive = np.zeros((nw, 6))
     for k, w in enumerate(walls):
+        if w.drive is not None:
+            drive[k] = w.drive.params()
         p0[k] = w.p0
         d = np.asarray(w.p1, float) - p0[k]
         length[k] = float(np.hypot(*d))
@@ -216,7 +220,7 @@ def wall_geometry(walls: list[Wall], media: list[str]):
         nrm[k] = np.asarray(w.normal, float) / np.hypot(*w.normal)
         if w.medium:
             medium[k] = media.index(w.medium)
-    return p0, tan, length, nrm, medium
+    return p0, tan, length, nrm, medium, drive
 
 
 @dataclass
@@ -269,13 +273,14 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     pA = 4.0 / 3.0 / inv_E * np.sqrt(R[i] * R[j] / (R[i] + R[j]))
     ms = system.mass[i] * system.mass[j] / (system.mass[i] + system.mass[j])
     pG = law.alpha_n * np.sqrt(ms * pA)
-    p0, tan, length, nrm, medium = system.wall_geometry
+    p0, tan, length, nrm, medium, drive = system.wall_geometry
     wg, ww = [], []
     for k in range(len(length)):
         r = pos - p0[k]
         along = r @ tan[k]
         h = r @ nrm[k]
-        ok = (h < R + skin) & (h > -R) & (along > -skin) & (along < length[k] + skin)
+        reach = abs(drive[k, 0])  # a moving wall comes this much closer
+        ok = (h < R + skin + reach) & (h > -R - reach) & (along > -skin) & (along < length[k] + skin)
         if medium[k] >= 0:
             ok &= system.medium_index == medium[k]
         idx = np.flatnonzero(ok)
@@ -285,7 +290,7 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     # granule-rigid wall: E* = E/(1-nu^2), R* = R, m* = m (eq. 4 with a rigid, immovable partner)
     wA = np.array([hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), effective_radius(R[g])) for g in wg]).reshape(-1)
     wG = np.array([damping_coefficient(law.alpha_n, effective_mass(system.mass[g], None), a) for g, a in zip(wg, wA)]).reshape(-1)
-    walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm)
+    walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm, drive)
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
@@ -306,6 +311,10 @@ def load_scales(system: GranularSystem, state: GranularState, duration: float = 
             driving = max(0.0, min(h.params[3], duration - h.params[2]))
             energy = max(energy, 0.5 * abs(h.params[0]) * v * driving)
         scales.append((v, energy))
+    for w in system.walls:  # a shaker: the speed it gives a granule, and that granule's energy then
+        if w.drive is not None and system.n:
+            sp = w.drive.peak_speed()
+            scales.append((sp, 0.5 * float(system.mass.max()) * sp * sp))
     v = np.abs(state.vel)
     for g in (np.flatnonzero(v.max(axis=1) > 0) if v.size else []):
         sp = float(np.hypot(*state.vel[g]))
@@ -427,7 +436,7 @@ class Stepper:
     def wall_forces(self, state: GranularState) -> np.ndarray:
         """The force each rigid wall takes from the granules, (n_walls, 2) [N]."""
         out = np.zeros((len(self.system.walls), 2))
-        kernels.wall_forces(state.y, self.model, out)
+        kernels.wall_forces(state.y, self.model, out, state.t)
         return out
 
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:

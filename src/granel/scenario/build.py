@@ -102,7 +102,7 @@ def build_granular(sc: Scenario, base: Path | None = None):
         except (OSError, ValueError) as err:
             raise ScenarioError(f"excitations.{k}.file = {e.file!r}: {err}") from None
         exc.append(Excitation(labels.index(e.granule), excitation_direction(e, side_of[e.granule]), hist))
-    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name) for w in sc.walls]
+    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, w.motion.drive() if w.motion is not None else None) for w in sc.walls]
     system = build_system(media, law, solid_contacts_for(sc, media), exc, walls)
     vel = np.zeros((system.n, 2))
     om = np.zeros(system.n)
@@ -133,6 +133,10 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
             bounds.append(e.history.params[1] / 10.0)
         elif e.history.top_frequency > 0:
             bounds.append(1.0 / (e.history.top_frequency * 20.0))
+    for w in system.walls:  # a shaker: its period, and the impacts at its speed
+        if w.drive is not None:
+            bounds.append(1.0 / (w.drive.frequency * 20.0))
+            speed = max(speed, w.drive.peak_speed())
     if (speed > 0 or force > 0) and system.n:
         kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
         for g in np.unique(kinds, axis=0, return_index=True)[1]:

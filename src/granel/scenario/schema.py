@@ -182,12 +182,49 @@ class MediumSpec(_Strict):
         return self
 
 
+class WallMotionSpec(_Strict):
+    """A shaker: the wall moves along its normal (into the granular side positive) as
+    s = amplitude r sin(2 pi frequency (t - t0) + phase), r the drives' (1 - cos)/2 ramp."""
+
+    amplitude: float = Field(description="[m]")
+    frequency: float = Field(gt=0, description="[Hz]")
+    phase: float = Field(0.0, description="[rad] at t0")
+    ramp_cycles: float = Field(0.0, ge=0)
+    t0: float = 0.0
+    duration: float | None = Field(None, description="default: to the end of the run")
+
+    @field_validator("t0", "duration", mode="before")
+    @classmethod
+    def _parse(cls, v):
+        return None if v is None else _time(v)
+
+    @model_validator(mode="after")
+    def _starts_at_rest(self):
+        if self.amplitude == 0:
+            raise ValueError("amplitude: a moving wall needs a non-zero amplitude [m]")
+        if self.duration is not None and not self.duration > 0:
+            raise ValueError(f"duration: must be a positive time, got {self.duration!r}")
+        if self.t0 < 0:
+            raise ValueError(f"t0: must be >= 0, got {self.t0!r}")
+        if self.t0 == 0 and self.ramp_cycles == 0 and math.sin(self.phase) != 0:
+            raise ValueError("phase: the wall must start where it rests (the static equilibrium and the first output "
+                             "are there): use phase = 0, ramp_cycles > 0 or t0 > 0")
+        return self
+
+    def drive(self):
+        from ..excitation import WallDrive
+
+        return WallDrive(self.amplitude, self.frequency, self.t0, self.duration if self.duration is not None else math.inf,
+                         self.phase, self.ramp_cycles)
+
+
 class WallSpec(_Strict):
     p0: tuple[float, float]
     p1: tuple[float, float]
     normal: tuple[float, float]
     medium: str = ""
     name: str = ""
+    motion: WallMotionSpec | None = None
 
     @model_validator(mode="after")
     def _nondegenerate(self):
