@@ -144,6 +144,12 @@ def test_equilibrium_of_a_precompressed_chain(tmp_path):
     ds = run_scenario(sc)
     np.testing.assert_allclose(ds["wall_force_normal"].values[:, 0], F0, rtol=1e-9)
     assert np.abs(ds["v_x"].values).max() < 1e-9
+    # the equilibrium contact by contact in the result: nine pairs and the wall, each at F0
+    names = list(ds["equilibrium_contact"].values)
+    assert names[0] == "C:1-C:2" and names[-1] == "C:10|far" and len(names) == 10
+    np.testing.assert_allclose(ds["equilibrium_force"].values, F0, rtol=1e-9)
+    np.testing.assert_allclose(ds["equilibrium_overlap"].values[:9], (F0 / A_pair) ** (2 / 3), rtol=1e-8)
+    assert ds["equilibrium_overlap"].values[9] == pytest.approx((F0 / A_wall) ** (2 / 3), rel=1e-8)
 
 
 @pytest.mark.parametrize("solid", ["rigid", "beam", "plate"])

@@ -26,3 +26,4 @@ class Problem:
     guards: Guards = Guards()  # the driver's stop rules
     solid_force0: np.ndarray | None = None  # (nc, 2) the static forces on the solid at t = 0 (a preload)
     equilibrium: dict | None = None  # the static equilibrium's numbers (granular.static.Equilibrium.summary)
+    equilibrium_contacts: tuple | None = None  # its loaded contacts: names, forces, overlaps (Equilibrium.contacts)

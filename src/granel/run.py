@@ -117,6 +117,13 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     attrs.update(problem.equilibrium or {})
     omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
     spec = trajectory_spec(traj, problem.system, solid, attrs, omega)
+    if problem.equilibrium_contacts is not None:  # the static equilibrium, contact by contact
+        names, force, overlap = problem.equilibrium_contacts
+        spec.coords["equilibrium_contact"] = ("equilibrium_contact", np.array(names, dtype=object))
+        spec.data["equilibrium_force"] = ("equilibrium_contact", np.asarray(force, float),
+                                          {"units": "N", "long_name": "normal force of each loaded contact at the static equilibrium"})
+        spec.data["equilibrium_overlap"] = ("equilibrium_contact", np.asarray(overlap, float),
+                                            {"units": "m", "long_name": "its overlap (eq. 2)"})
     return spec.to_dataset() if dataset else spec
 
 

@@ -246,9 +246,10 @@ def _curves(ds: xr.Dataset):
 
 
 def plot_spectrum(ds: xr.Dataset, output):
-    """Mobility over frequency per amplitude (fwd solid, bwd dashed) and the nonreciprocity
-    [dB] over frequency per amplitude, plus a map over frequency x amplitude when there are
-    several amplitudes; any other sweep axis at its first value."""
+    """Four panels over drive frequency, one colour per amplitude, forward solid and backward
+    dashed: the transmissibility |V_B| / |V_A| and the mobility |V_B| / F; the nonreciprocity
+    [dB] (open symbols where a mobility is 40 dB below its peak, `resolved`); and, with several
+    amplitudes, its map over frequency x amplitude. Any other sweep axis at its first value."""
     import matplotlib
     import matplotlib.ticker
 
@@ -260,47 +261,51 @@ def plot_spectrum(ds: xr.Dataset, output):
     sub, rest = _curves(ds)
     f = sub["frequency"].values / 1e3
     amps = sub["amplitude"].values if "amplitude" in sub.dims else [None]
-    has_map = "nonreciprocity_db" in sub and "amplitude" in sub.dims and len(amps) > 2
-    fig, axes = plt.subplots(1, 3 if has_map else 2, figsize=(15 if has_map else 10, 4.2), squeeze=False)
-    ax1, ax2 = axes[0, 0], axes[0, 1]
+    has_map = "nonreciprocity_db" in sub and "amplitude" in sub.dims and len(amps) > 1
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), squeeze=False)
+    (ax_t, ax_m), (ax_n, ax_map) = axes
     colors = plt.cm.viridis(np.linspace(0.0, 0.85, len(amps)))
     for c, a in zip(colors, amps):
         one = sub.sel(amplitude=a) if a is not None else sub
         for d, style in zip(one["direction"].values, ("-", "--")):
-            ax1.plot(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3,
-                       label=f"{a:g} N, {d}" if a is not None else d)
+            label = f"{a:g} N, {d}" if a is not None else d
+            ax_t.plot(f, one["transmissibility"].sel(direction=d).values, style, color=c, marker="o", ms=3, label=label)
+            ax_m.plot(f, one["mobility"].sel(direction=d).values, style, color=c, marker="o", ms=3, label=label)
         if "nonreciprocity_db" in one:
             nr, ok = one["nonreciprocity_db"].values, resolved(one)
-            ax2.plot(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
-            ax2.plot(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
-    ax1.set_xlabel("drive frequency [kHz]")
-    ax1.set_ylabel("mobility |V(f)| / F [m/(N s)]")
-    ax1.set_title(f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}", fontsize=9)
-    ax1.legend(fontsize=7)
-    ax2.axhline(0.0, color="0.6", lw=0.8)
-    ax2.set_xlabel("drive frequency [kHz]")
-    ax2.set_ylabel("nonreciprocity 20 log10(fwd / bwd) [dB]")
-    ax2.set_title("open symbols: a mobility 40 dB below its peak (stop band)", fontsize=8)
-    ax1.set_yscale("log")
+            ax_n.plot(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
+            ax_n.plot(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
+    route = f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}"
+    ax_t.set_ylabel("transmissibility |V_measured| / |V_driven|")
+    ax_t.set_title(route, fontsize=9)
+    ax_m.set_ylabel("mobility |V_measured| / F [m/(N s)]")
+    ax_m.set_title(route, fontsize=9)
+    for ax in (ax_t, ax_m):
+        ax.set_yscale("log")
+        ax.legend(fontsize=7)
+    ax_n.axhline(0.0, color="0.6", lw=0.8)
+    ax_n.set_ylabel("nonreciprocity 20 log10(mobility fwd / bwd) [dB]")
+    ax_n.set_title("open symbols: a mobility 40 dB below its peak (stop band)", fontsize=8)
+    if len(amps) > 1 or amps[0] is not None:
+        ax_n.legend(fontsize=7)
     wide = f.max() > 5 * f.min()  # a log frequency axis over wide ranges only
-    for ax in [ax1, ax2] + ([axes[0, 2]] if has_map else []):
+    for ax in (ax_t, ax_m, ax_n, ax_map):
+        ax.set_xlabel("drive frequency [kHz]")
         ax.set_xscale("log" if wide else "linear")
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    if len(amps) > 1 or amps[0] is not None:
-        ax2.legend(fontsize=7)
     if has_map:
-        m = axes[0, 2].pcolormesh(f, amps, sub["nonreciprocity_db"].transpose("amplitude", "frequency").values,
-                                  shading="nearest", cmap="RdBu_r",
-                                  vmin=-np.nanmax(np.abs(sub["nonreciprocity_db"].values)),
-                                  vmax=np.nanmax(np.abs(sub["nonreciprocity_db"].values)))
+        vals = sub["nonreciprocity_db"].transpose("amplitude", "frequency").values
+        top = np.nanmax(np.abs(vals)) if np.isfinite(vals).any() else 1.0
+        m = ax_map.pcolormesh(f, amps, vals, shading="nearest", cmap="RdBu_r", vmin=-top, vmax=top)
         if max(amps) > 5 * min(amps):
-            axes[0, 2].set_yscale("log")
-        axes[0, 2].set_yticks(amps, [f"{a:g}" for a in amps])
-        axes[0, 2].yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        axes[0, 2].set_xlabel("drive frequency [kHz]")
-        axes[0, 2].set_ylabel("drive amplitude [N]")
-        fig.colorbar(m, ax=axes[0, 2], label="nonreciprocity [dB]")
+            ax_map.set_yscale("log")
+        ax_map.set_yticks(amps, [f"{a:g}" for a in amps])
+        ax_map.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax_map.set_ylabel("drive amplitude [N]")
+        fig.colorbar(m, ax=ax_map, label="nonreciprocity [dB]")
+    else:
+        ax_map.set_visible(False)
     if rest:
         fig.suptitle(", ".join(f"{k} = {ds[k].values[0]}" for k in rest), fontsize=9)
     fig.tight_layout()

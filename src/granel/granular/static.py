@@ -41,6 +41,16 @@ class Equilibrium:
     def max_overlap(self) -> float:
         return float(max(self.pair_overlaps.max(initial=0.0), self.wall_overlaps.max(initial=0.0)))
 
+    def contacts(self, labels: list[str], wall_names: list[str]) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Every loaded contact: its name ('C:1-C:2', a granule and a wall 'C:20|far', a solid
+        contact 'C:3|solid'), its normal force [N] and its overlap [m] (the solid's: its force only,
+        overlap NaN)."""
+        names = [f"{labels[i]}-{labels[j]}" for i, j in self.pairs] + \
+            [f"{labels[g]}|{wall_names[w]}" for g, w in self.walls]
+        force = np.concatenate([self.pair_forces, self.wall_forces])
+        overlap = np.concatenate([self.pair_overlaps, self.wall_overlaps])
+        return names, force, overlap
+
     def summary(self) -> dict:
         """Numbers for the run's attributes and summary."""
         fs = np.hypot(*self.solid_forces.T) if len(self.solid_forces) else np.zeros(0)

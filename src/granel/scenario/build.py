@@ -337,18 +337,18 @@ def build_problem(sc: Scenario) -> Problem:
     system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
     state = type(state)(state.y.copy(), state.t)
     solid = build_solid(sc, system)
-    force0, report = None, None
+    force0, report, table = None, None, None
     if sc.simulation.equilibrate:
-        force0, report = equilibrate(system, state, solid)
+        force0, report, table = equilibrate(system, state, solid)
     guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state, sc.simulation.duration)[1])
-    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report)
+    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report, table)
 
 
 def equilibrate(system, state, solid):
     """Move the granules of `state` (in place) to the static equilibrium of the constant loads
     (`granular.static`) with the solid's static compliance at its contacts; returns the forces on
-    the solid there (nc, 2) and the equilibrium's numbers. A load that nothing holds is a
-    ScenarioError naming the granule."""
+    the solid there (nc, 2), the equilibrium's numbers and its loaded contacts
+    (`Equilibrium.contacts`). A load that nothing holds is a ScenarioError naming the granule."""
     from ..granular.static import NoEquilibrium, equilibrium
     from ..granular.system import Stepper
 
@@ -364,4 +364,6 @@ def equilibrate(system, state, solid):
     except NoEquilibrium as err:
         raise ScenarioError(f"simulation.equilibrate: {err}") from None
     state.y[: 2 * system.n] = eq.pos.ravel()
-    return eq.solid_forces, eq.summary()
+    from ..results import wall_names
+
+    return eq.solid_forces, eq.summary(), eq.contacts(system.labels, wall_names(system))
