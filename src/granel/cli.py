@@ -237,12 +237,18 @@ def show(
     scenario: str = typer.Argument(..., help="built-in name or TOML file"),
     output: Path = typer.Option(Path("geometry.png"), "-o", "--output", help="PNG or PDF"),
     solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
-    set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
+    set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value (key=- removes it)"),
+    resolved: bool = typer.Option(False, "--resolved", help="print the fully resolved scenario (every default) as TOML "
+                                                            "instead of drawing"),
 ):
-    """Draw the packing with labels, walls, the solid and the excitations."""
+    """Draw the packing with labels, walls, the solid and the excitations; or, with --resolved,
+    print the scenario as granel reads it, every default filled in."""
+    sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
+    if resolved:
+        sys.stdout.write(S.to_toml(sc))
+        return
     from .plots import plot_geometry
 
-    sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
     plot_geometry(sc, output)
     console.print(f"wrote {output}")
 

@@ -60,8 +60,14 @@ def _coerce(text: str):
         return text
 
 
+# an override's value that removes its key or list entry (a bare - is no TOML value, so it cannot mean one)
+REMOVE = "-"
+
+
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
-    """Apply `a.b.c=value` overrides (list indices as numbers: media.1.radius=0.006)."""
+    """Apply `a.b.c=value` overrides (list indices as numbers: media.1.radius=0.006); `key=-`
+    removes the key or the list entry (media.1=- drops the second medium, the later ones moving
+    up, so that several removals from one list count on the list as each leaves it)."""
     raw = copy.deepcopy(raw)
     for item in overrides:
         if "=" not in item:
@@ -82,6 +88,15 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         if not isinstance(node, (dict, list)):
             raise ScenarioError(f"override {key!r}: {'.'.join(parts[:-1])} is a value, not a table")
         last = parts[-1]
+        if val.strip() == REMOVE:
+            try:
+                if isinstance(node, list):
+                    del node[int(last)]
+                else:
+                    del node[last]
+            except (ValueError, IndexError, KeyError):
+                raise ScenarioError(f"override {key!r}=-: nothing to remove there") from None
+            continue
         if isinstance(node, list):
             try:
                 node[int(last)] = _coerce(val)

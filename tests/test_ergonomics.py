@@ -1,0 +1,38 @@
+"""Scenario ergonomics: `--set key=-` removes a key or a list entry, and `granel show --resolved`
+prints the scenario with every default, as TOML that reads back to the same scenario."""
+
+import tomllib
+
+import pytest
+from typer.testing import CliRunner
+
+from granel import scenario as S
+from granel.cli import app
+
+runner = CliRunner()
+
+
+def test_an_override_removes_a_list_entry_or_a_key():
+    sc = S.load("paper", ["media.1=-"])
+    assert [m.name for m in sc.media] == ["LSGM"]
+    raw, _ = S.load_raw("paper")
+    out = S.apply_overrides(raw, ["media.0=-", "media.0.radius=0.006", "excitations.0.tau=-"])
+    assert [m["name"] for m in out["media"]] == ["SSGM"] and out["media"][0]["radius"] == 0.006
+    assert "tau" not in out["excitations"][0]
+    assert len(raw["media"]) == 2  # the original is untouched
+    for bad in ("media.7=-", "contact.nothing=-", "media.x=-"):
+        with pytest.raises(S.ScenarioError, match="nothing to remove"):
+            S.apply_overrides(raw, [bad])
+
+
+def test_show_resolved_prints_every_default_and_reads_back():
+    res = runner.invoke(app, ["show", "paper", "--resolved", "--set", "media.1=-", "--set", "contact.mu=0.2"])
+    assert res.exit_code == 0, res.output
+    data = tomllib.loads(res.stdout)
+    assert data["contact"]["mu"] == 0.2 and len(data["media"]) == 1
+    for key in ("ledger_tol", "balance_limit", "overlap_limit", "equilibrate", "integrator"):
+        assert key in data["simulation"]
+    again = S.validate(data)
+    assert S.to_toml(again) == res.stdout
+    res = runner.invoke(app, ["show", "paper", "--resolved", "--set", "media.9=-"])
+    assert res.exit_code == 2 and "nothing to remove" in " ".join(res.output.split())
