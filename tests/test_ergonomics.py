@@ -36,3 +36,23 @@ def test_show_resolved_prints_every_default_and_reads_back():
     assert S.to_toml(again) == res.stdout
     res = runner.invoke(app, ["show", "paper", "--resolved", "--set", "media.9=-"])
     assert res.exit_code == 2 and "nothing to remove" in " ".join(res.output.split())
+
+
+def test_init_writes_a_valid_commented_template_and_never_replaces_a_file(tmp_path, monkeypatch):
+    """`granel init demo`: demo.toml is the paper's scenario under another name (identical once
+    resolved), with the schema's descriptions as comments; a second init refuses (exit 2) and
+    leaves the file as it was."""
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["init", "demo"])
+    assert res.exit_code == 0, res.output
+    text = (tmp_path / "demo.toml").read_text()
+    assert "# Coulomb friction coefficient" in text and "# granules_file = ..." in text
+    sc = S.load(str(tmp_path / "demo.toml"))
+    paper = S.load("paper")
+    assert sc.name == "demo"
+    assert S.to_toml(sc.model_copy(update={"name": paper.name, "description": paper.description})) == S.to_toml(paper)
+    (tmp_path / "demo.toml").write_text(text + "# mine\n")
+    res = runner.invoke(app, ["init", "demo"])
+    assert res.exit_code == 2 and "never replaces" in " ".join(res.output.split())
+    assert (tmp_path / "demo.toml").read_text().endswith("# mine\n")
+    assert runner.invoke(app, ["init", "../x"]).exit_code == 2

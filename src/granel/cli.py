@@ -254,6 +254,29 @@ def show(
 
 
 @app.command()
+def init(
+    name: str = typer.Argument(..., help="the scenario's name; writes NAME.toml"),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="the file to write (default NAME.toml)"),
+):
+    """Write a scenario to start from: the paper's set-up with every field shown, each with its
+    description, and the optional ones listed commented out. An existing file is never replaced."""
+    from .results import atomic_path
+    from .scenario.template import template
+
+    if not name.strip() or "/" in name or name.startswith("."):
+        _fail(f"NAME {name!r}: give a plain name, e.g. mychain")
+    out = output or Path(f"{name}.toml")
+    if out.exists():
+        _fail(f"{out}: exists; granel init never replaces a file (choose another NAME or -o)")
+    try:
+        with atomic_path(out) as tmp:
+            Path(tmp).write_text(template(name))
+    except OSError as e:
+        _fail(f"{out}: cannot write it ({e})", 4)
+    console.print(f"wrote {out}: the paper's set-up, every field shown; `granel show {out} --resolved` prints what granel reads")
+
+
+@app.command()
 def modes(
     scenario: str = typer.Argument("paper", help="built-in name or TOML file"),
     solid: Optional[str] = typer.Option(None, help="plate | beam"),

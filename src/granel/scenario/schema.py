@@ -109,9 +109,9 @@ class SimulationSpec(_Strict):
 
 
 class ContactSpec(_Strict):
-    mu: float = Field(0.099, ge=0, le=10)
-    alpha_n: float = Field(6.313e-3, ge=0)
-    k_s: float = Field(100.0, gt=0)
+    mu: float = Field(0.099, ge=0, le=10, description="Coulomb friction coefficient, eq. (5) (the paper's 0.099)")
+    alpha_n: float = Field(6.313e-3, ge=0, description="Tsuji damping, eq. (3) (the paper's 6.313e-3; 0: undamped)")
+    k_s: float = Field(100.0, gt=0, description="tanh smoothness of the friction law, eq. (5) [s/m]")
 
 
 class MaterialSpec(_Strict):
