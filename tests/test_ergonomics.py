@@ -56,3 +56,43 @@ def test_init_writes_a_valid_commented_template_and_never_replaces_a_file(tmp_pa
     assert res.exit_code == 2 and "never replaces" in " ".join(res.output.split())
     assert (tmp_path / "demo.toml").read_text().endswith("# mine\n")
     assert runner.invoke(app, ["init", "../x"]).exit_code == 2
+
+
+def test_a_scenario_without_a_solid(tmp_path):
+    """`solid.kind = "none"`: two steel granules (R = 5 mm) in head-on collision, nothing else:
+    no solid contact, no solid energy, momentum conserved to round-off, and the rebound speeds
+    those of an elastic collision of equal masses (exchanged) within 1e-6 of the impact speed;
+    a hexagonal medium can be placed without a solid beside it."""
+    import numpy as np
+
+    from granel.run import run_scenario
+
+    (tmp_path / "two.csv").write_text("label,x,y,radius\nA,0.0,0.0,0.005\nB,0.0101,0.0,0.005\n")
+    (tmp_path / "two.toml").write_text("""name = "two"
+[simulation]
+duration = "250us"
+output_every = "1us"
+[contact]
+mu = 0.0
+alpha_n = 0.0
+[solid]
+kind = "none"
+[[media]]
+name = "G"
+side = "none"
+granules_file = "two.csv"
+[[initial_velocities]]
+granule = "G:A"
+v = [1.0, 0.0]
+""")
+    ds = run_scenario(S.load(str(tmp_path / "two.toml")))
+    assert ds.attrs["solid_kind"] == "rigid" and ds.sizes.get("contact", 0) == 0
+    assert np.abs(ds["energy_solid"].values).max() == 0.0
+    p = ds["v_x"].values.sum(axis=1)
+    assert np.abs(p - 1.0).max() < 1e-12
+    assert ds["v_x"].values[-1, 0] == pytest.approx(0.0, abs=1e-6) and ds["v_x"].values[-1, 1] == pytest.approx(1.0, abs=1e-6)
+    hexa = S.load("paper", ['solid.kind="none"', "media.1=-"])
+    from granel.scenario.build import build_granular
+
+    system, _, _ = build_granular(hexa, hexa.base)
+    assert system.n == 14 and not system.solid_contacts

@@ -137,7 +137,7 @@ def _without_dask() -> None:
 @app.command()
 def run(
     scenario: str = typer.Argument(..., help="built-in name (see `granel scenarios`) or a TOML file"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | rigid | none"),
     excite: Optional[str] = typer.Option(None, help="granule label of the first excitation, e.g. LSGM:3 or SSGM:C"),
     shock: Optional[str] = typer.Option(None, help="weak | moderate | strong (the paper's half-sine levels) or a peak force in N"),
     duration: Optional[str] = typer.Option(None, help="simulated time, e.g. 0.8ms"),
@@ -236,7 +236,7 @@ def scenarios():
 def show(
     scenario: str = typer.Argument(..., help="built-in name or TOML file"),
     output: Path = typer.Option(Path("geometry.png"), "-o", "--output", help="PNG or PDF"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | rigid | none"),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value (key=- removes it)"),
     resolved: bool = typer.Option(False, "--resolved", help="print the fully resolved scenario (every default) as TOML "
                                                             "instead of drawing"),
@@ -289,8 +289,8 @@ def modes(
     from .solid.modal import classify_modes, modal_analysis
 
     sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
-    if sc.solid is None or sc.solid.kind == "rigid":
-        _fail("modes: the solid is rigid; choose --solid plate or --solid beam")
+    if sc.solid is None or sc.solid.kind in ("rigid", "none"):
+        _fail(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or --solid beam")
     model = S.build_problem(sc).solid
     want = max(count, 7 if plot else 0)
     md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)

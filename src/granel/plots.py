@@ -38,7 +38,7 @@ def plot_geometry(sc, output: str | Path, ax=None):
         ax.text(x, y, system.labels[g].split(":")[-1], ha="center", va="center", fontsize=7)
     for w in system.walls:
         ax.plot([w.p0[0], w.p1[0]], [w.p0[1], w.p1[1]], color="k", lw=2.5, solid_capstyle="butt")
-    if sc.solid is not None:
+    if sc.solid is not None and sc.solid.kind != "none":
         s = sc.solid
         ax.add_patch(Rectangle((s.x0, s.y0), s.width, s.length, fc="#BBBBBB", ec="k", lw=0.8, hatch="//" if s.kind == "rigid" else None))
         ax.plot([s.x0, s.x0 + s.width], [s.y0, s.y0], color="k", lw=3)

@@ -70,8 +70,8 @@ def tagged(fig, panel: str, kind: str) -> dict:
 
 
 def _require_solid(sc) -> None:
-    if sc.solid is None:
-        raise ValueError(f"scenario {sc.name!r} has no solid ([solid] table): Figs. 1-2 draw a granular-solid "
+    if sc.solid is None or sc.solid.kind == "none":
+        raise ValueError(f"scenario {sc.name!r} has no solid ([solid] table or kind = none): Figs. 1-2 draw a granular-solid "
                          "interface; add a solid (kind = plate | beam | rigid)")
 
 

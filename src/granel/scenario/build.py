@@ -25,8 +25,13 @@ from .schema import ExcitationSpec, Scenario, ScenarioError
 HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
 
 
+def present_solid(sc: Scenario):
+    """The scenario's solid, or None for `solid.kind = "none"` (granules, walls and loads only)."""
+    return None if sc.solid is None or sc.solid.kind == "none" else sc.solid
+
+
 def build_media(sc: Scenario, base: Path | None = None):
-    solid = sc.solid
+    solid = present_solid(sc)
     media = []
     for k, m in enumerate(sc.media):
         mat = sc.materials[m.material].material()
@@ -60,9 +65,9 @@ def build_media(sc: Scenario, base: Path | None = None):
 def solid_contacts_for(sc: Scenario, media) -> list:
     """Contact points of the solid: the granules of column 0 of each medium beside the solid
     whose centre lies within the solid's length, at the face point nearest to the centre."""
-    if sc.solid is None:
+    s = present_solid(sc)
+    if s is None:
         return []
-    s = sc.solid
     out, offset = [], 0
     for med in media:
         if med.side in ("left", "right"):
@@ -173,7 +178,7 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
                     f"media: granules {system.labels[i[k]]} and {system.labels[j[k]]} overlap by {over[k]:.3e} m "
                     "(initial states must be free of compression)"
                 )
-    if sc.solid is not None:
+    if present_solid(sc) is not None:
         s = sc.solid
         inside = (pos[:, 0] + R > s.x0 + 1e-12) & (pos[:, 0] - R < s.x0 + s.width - 1e-12) & \
                  (pos[:, 1] > s.y0) & (pos[:, 1] < s.y0 + s.length)
@@ -297,7 +302,7 @@ def check_times(sim) -> None:
 def build_solid(sc: Scenario, system) -> SolidModel:
     """The scenario's solid; one contact point per granule-solid contact of `system`, in the
     same order (names are the granule labels)."""
-    s = sc.solid
+    s = present_solid(sc)
     if s is None or s.kind == "rigid":
         return rigid_solid([(c.name, c.point, c.normal) for c in system.solid_contacts])
     mat = sc.materials[s.material]

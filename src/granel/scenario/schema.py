@@ -134,7 +134,7 @@ class PlateMeshSpec(_Strict):
 
 
 class SolidSpec(_Strict):
-    kind: Literal["plate", "beam", "rigid"] = "plate"
+    kind: Literal["plate", "beam", "rigid", "none"] = "plate"
     material: str = "steel"
     x0: float = 0.0
     y0: float = 0.0
