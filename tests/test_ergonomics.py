@@ -96,3 +96,24 @@ v = [1.0, 0.0]
 
     system, _, _ = build_granular(hexa, hexa.base)
     assert system.n == 14 and not system.solid_contacts
+
+
+def test_a_hexagonal_medium_anywhere():
+    """`media.N.face_x` (with `center_y`) places a hexagonal medium away from any solid: the
+    paper's SSGM (R = 5 mm, columns 5, 4, 5) grown rightward from x = 0.3, centred on y = -0.2,
+    has column 0 at x = 0.305 and its channel walls 5 mm beyond its outer granules."""
+    import numpy as np
+
+    from granel.scenario.build import build_granular
+
+    sc = S.load("paper", ['solid.kind="none"', "media.0=-", "media.0.face_x=0.3", "media.0.center_y=-0.2",
+                          'excitations.0.granule="SSGM:C"'])
+    system, _, _ = build_granular(sc, sc.base)
+    x, y = system.pos0[:, 0], system.pos0[:, 1]
+    assert x.min() == pytest.approx(0.305, abs=1e-12)
+    assert x.max() == pytest.approx(0.305 + 2 * 0.005 * np.sqrt(3), abs=1e-12)
+    col0 = np.isclose(x, 0.305)
+    assert col0.sum() == 5 and np.mean(y[col0]) == pytest.approx(-0.2, abs=1e-12)
+    walls = {w.name: w for w in system.walls}
+    assert walls["SSGM:bottom"].p0[1] == pytest.approx(y.min() - 0.005)
+    assert walls["SSGM:top"].p0[1] == pytest.approx(y.max() + 0.005)

@@ -53,6 +53,8 @@ def build_media(sc: Scenario, base: Path | None = None):
             else:
                 face = 0.0
                 cy = m.center_y if m.center_y is not None else 0.0
+            if m.face_x is not None:
+                face = m.face_x
             try:
                 med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, cy, m.labels,
                                         m.channel_walls, m.outer_wall, m.gap)

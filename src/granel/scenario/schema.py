@@ -152,7 +152,9 @@ class MediumSpec(_Strict):
     radius: float | None = Field(None, gt=0)
     material: str = "steel"
     columns: list[Annotated[int, Field(ge=1)]] | None = None
-    center_y: float | None = None
+    center_y: float | None = Field(None, description="y of column 0's centre (default: the solid's mid-length, or 0)")
+    face_x: float | None = Field(None, description="x of the face column 0 touches (default: the solid's face on this "
+                                                   "side, or 0): a medium anywhere")
     labels: Union[Literal["numeric", "alpha"], list[str]] = "numeric"
     channel_walls: bool = True
     outer_wall: bool = False
