@@ -117,3 +117,15 @@ def test_a_hexagonal_medium_anywhere():
     walls = {w.name: w for w in system.walls}
     assert walls["SSGM:bottom"].p0[1] == pytest.approx(y.min() - 0.005)
     assert walls["SSGM:top"].p0[1] == pytest.approx(y.max() + 0.005)
+
+
+def test_one_version():
+    """The package, its installed metadata and CITATION.cff give the same version."""
+    from importlib.metadata import version
+    from pathlib import Path
+
+    import granel
+
+    cff = (Path(__file__).resolve().parents[1] / "CITATION.cff").read_text()
+    line = next(x for x in cff.splitlines() if x.startswith("version:"))
+    assert line.split(":", 1)[1].strip() == granel.__version__ == version("granel")

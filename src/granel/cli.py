@@ -655,6 +655,43 @@ def spectrum(
         _fail(f"{len(failed)} of {n} cases failed (listed above); a rerun retries them", 3)
 
 
+@app.command()
+def export(
+    result: Path = typer.Argument(..., help="a result NetCDF file of `granel run`"),
+    out: Path = typer.Option(..., "-o", "--out", help="output folder (created if missing)"),
+    format_: Optional[list[str]] = typer.Option(None, "--format", help="vtk | xdmf | csv | extxyz (repeatable or "
+                                                                      "comma separated; default: all four)"),
+):
+    """Export a run for ParaView (VTU + PVD, XDMF), OVITO (extended XYZ) and spreadsheets (CSV):
+    the granules at every output and the plate's or beam's nodal displacement, velocity and
+    element energy density at every stored solid output."""
+    from .export import ExportError, count_steps, export_result, parse_formats, read_export_result
+    from .figures import model_of
+
+    try:
+        formats = parse_formats(format_)
+    except ExportError as e:
+        _fail(str(e), e.code)
+    if not result.exists():
+        _fail(f"{result}: no such file")
+    if out.exists() and not out.is_dir():
+        _fail(f"-o {out}: is a file, not a folder")
+    try:
+        ds = read_export_result(result)
+    except ExportError as e:
+        _fail(str(e), e.code)
+    _check_folder(out, "-o")
+    total = count_steps(ds, model_of(ds)[2], formats)
+    try:
+        with Progress(TextColumn("[bold]export"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), console=console, transient=True) as bar:
+            task = bar.add_task("export", total=total)
+            written = export_result(ds, out, formats, tick=lambda: bar.advance(task))
+    except OSError as e:
+        _fail(f"-o {out}: cannot write the export ({e})", 4)
+    console.print(f"wrote {len(written)} files ({', '.join(formats)}) in {out}")
+
+
 @app.command("map")
 def map_(
     summary: Path = typer.Argument(..., help="a sweep's summary.nc"),

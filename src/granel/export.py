@@ -1,0 +1,325 @@
+"""Export a run's result (the NetCDF file of `granel run`) for ParaView, OVITO and spreadsheets.
+
+Formats (any combination):
+
+* ``vtk``: the granules as one VTU point cloud per output (``granules/granules_NNNNNN.vtu``) and
+  the time series ``granules.pvd`` (radius, velocity, omega and kinetic energy as point data: show
+  them as sphere glyphs scaled by radius); a plate or beam as one VTU per stored solid output
+  (``solid/solid_NNNNNN.vtu``, Q8 quadrilaterals or the beam's centre line as line cells) with
+  ``solid.pvd``: nodal displacement and velocity, element energy density.
+* ``xdmf``: the same through meshio's XDMF time-series writer (``granules.xdmf`` + ``.h5``,
+  ``solid.xdmf`` + ``.h5``). An XDMF time series has one fixed mesh, so the granules' points are
+  their initial centres; their centres at each output are the point data ``position`` (and
+  ``displacement`` from the initial centres: ParaView's Warp By Vector moves them).
+* ``extxyz``: ``granules.extxyz``, one extended-XYZ frame per output (for OVITO).
+* ``csv``: ``traces.csv`` (long format: time, granule, x, y, v_x, v_y, omega), ``walls.csv``
+  (time, wall, normal, tangential), ``contacts.csv`` (time, contact, normal, tangential) and
+  ``energies.csv`` (time and the energy-ledger variables that have only the time dimension).
+
+Every file is first written into a hidden staging folder inside the output folder and then moved
+into place with `os.replace` (so each file appears whole); the staging folder, and only it, is
+removed afterwards. Files of the same names are replaced; nothing else in the folder is touched.
+
+The solid's nodal fields are rebuilt with the functions the movies use: the solid model from the
+result's scenario text (`figures.model_of`), the reduced state at the stored solid outputs
+(`animate.solid_states`, i.e. `analysis.solid.reduced_states`), the nodal displacement with the
+model's `full_displacement` and the element energy density with `analysis.density.solid_energy_density`.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+FORMATS = ("vtk", "xdmf", "csv", "extxyz")
+EXTXYZ_PROPERTIES = "species:S:1:pos:R:3:radius:R:1:velo:R:3:omega:R:1"
+# the variables of energies.csv: the energy ledger of eq. (11)-(13), one value per output
+LEDGER_PREFIXES = ("energy_", "dissipated_")
+LEDGER_NAMES = ("input_work", "balance_error")
+# stored solid outputs reconstructed at once (bounds the memory of q = Phi eta)
+SOLID_CHUNK = 64
+
+
+class ExportError(ValueError):
+    """A wrong request (code 2) or a file that cannot be read or written (code 4); the message
+    names the option or the file."""
+
+    def __init__(self, message: str, code: int = 2):
+        super().__init__(message)
+        self.code = code
+
+
+def parse_formats(values: Iterable[str] | None) -> list[str]:
+    """The --format values (repeatable, or comma separated) in a fixed order; all when none given.
+    ExportError (code 2) naming an unknown one."""
+    if not values:
+        return list(FORMATS)
+    asked = []
+    for v in values:
+        for f in str(v).split(","):
+            f = f.strip().lower()
+            if not f:
+                continue
+            if f not in FORMATS:
+                raise ExportError(f"--format {f!r}: choose from {', '.join(FORMATS)}")
+            asked.append(f)
+    if not asked:
+        raise ExportError(f"--format: give one of {', '.join(FORMATS)}")
+    return [f for f in FORMATS if f in asked]
+
+
+def read_export_result(path) -> "xr.Dataset":
+    """A run's result, checked as the movies check it; ExportError (code 4) naming the file."""
+    from .animate import ResultFileError, read_result
+
+    try:
+        return read_result(path)
+    except ResultFileError as e:
+        raise ExportError(str(e), 4) from None
+
+
+# --------------------------------------------------------------------------------------------
+# what is exported
+
+
+def _fmt(x) -> str:
+    """A float as the shortest text that reads back to the same float64."""
+    return repr(float(x))
+
+
+def _vec3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.column_stack([a, b, np.zeros_like(a)])
+
+
+def has_solid(ds, model) -> bool:
+    return model.kind in ("plate", "beam") and "solid_time" in ds and model.nodes is not None
+
+
+def granule_frame(ds, system, k: int) -> dict[str, np.ndarray]:
+    """The granules at output k: centres (n, 3), and the point data."""
+    x, y = ds["x"].values[k].astype(float), ds["y"].values[k].astype(float)
+    vx, vy = ds["v_x"].values[k].astype(float), ds["v_y"].values[k].astype(float)
+    om = ds["omega"].values[k].astype(float)
+    kin = 0.5 * system.mass * (vx**2 + vy**2) + 0.5 * system.inertia * om**2
+    return {"points": _vec3(x, y), "radius": np.asarray(system.radius, float), "velocity": _vec3(vx, vy),
+            "omega": om, "kinetic_energy": kin}
+
+
+def solid_cells(model) -> list[tuple[str, np.ndarray]]:
+    """The solid's cells for meshio: Q8 plate elements (corners, then the midpoints of the sides
+    0-1, 1-2, 2-3, 3-0: VTK's quadratic quad order) or the beam's two-node elements."""
+    kind = "quad8" if model.kind == "plate" else "line"
+    return [(kind, np.asarray(model.elements, dtype=np.int64))]
+
+
+def solid_frames(ds, model) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+    """(time, nodal displacement (nn, 3), nodal velocity (nn, 3), element energy density (ne,))
+    at each stored solid output."""
+    from .analysis.density import solid_energy_density
+    from .animate import solid_states
+
+    ts = ds["solid_time"].values.astype(float)
+    for a in range(0, len(ts), SOLID_CHUNK):
+        Q, V = solid_states(ds, ts[a:a + SOLID_CHUNK])
+        for t, q, v in zip(ts[a:a + SOLID_CHUNK], Q, V):
+            u, w = model.full_displacement(q), model.full_displacement(v)
+            yield float(t), _vec3(u[:, 0], u[:, 1]), _vec3(w[:, 0], w[:, 1]), np.asarray(solid_energy_density(model, q, v), float)
+
+
+def solid_points(model) -> np.ndarray:
+    return _vec3(model.nodes[:, 0].astype(float), model.nodes[:, 1].astype(float))
+
+
+def count_steps(ds, model, formats) -> int:
+    """The number of progress ticks of `export_result`."""
+    nt = ds.sizes["time"]
+    nst = ds.sizes["solid_time"] if has_solid(ds, model) else 0
+    per = {"vtk": nt + nst, "xdmf": nt + nst, "extxyz": nt, "csv": 4}
+    return sum(per[f] for f in formats)
+
+
+# --------------------------------------------------------------------------------------------
+# writers (into the staging folder)
+
+
+def _pvd(path: Path, entries: list[tuple[float, str]]) -> None:
+    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines += [f'    <DataSet timestep="{_fmt(t)}" group="" part="0" file="{name}"/>' for t, name in entries]
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    path.write_text("\n".join(lines))
+
+
+def write_vtk(ds, system, model, stage: Path, tick: Callable[[], None]) -> list[str]:
+    import meshio
+
+    files = []
+    times = ds["time"].values.astype(float)
+    n = system.n
+    (stage / "granules").mkdir(exist_ok=True)
+    entries = []
+    for k, t in enumerate(times):
+        g = granule_frame(ds, system, k)
+        name = f"granules/granules_{k:06d}.vtu"
+        mesh = meshio.Mesh(g.pop("points"), [("vertex", np.arange(n, dtype=np.int64)[:, None])], point_data=g)
+        meshio.write(stage / name, mesh, file_format="vtu")
+        entries.append((t, name))
+        files.append(name)
+        tick()
+    _pvd(stage / "granules.pvd", entries)
+    files.append("granules.pvd")
+    if has_solid(ds, model):
+        (stage / "solid").mkdir(exist_ok=True)
+        pts, cells = solid_points(model), solid_cells(model)
+        entries = []
+        for k, (t, u, v, w) in enumerate(solid_frames(ds, model)):
+            name = f"solid/solid_{k:06d}.vtu"
+            mesh = meshio.Mesh(pts, cells, point_data={"displacement": u, "velocity": v},
+                               cell_data={"energy_density": [w]})
+            meshio.write(stage / name, mesh, file_format="vtu")
+            entries.append((t, name))
+            files.append(name)
+            tick()
+        _pvd(stage / "solid.pvd", entries)
+        files.append("solid.pvd")
+    return files
+
+
+def _time_series_writer(path: Path):
+    """meshio's XDMF TimeSeriesWriter with its HDF5 file beside the .xdmf file (meshio 5.3 opens
+    it in the current folder)."""
+    from meshio.xdmf import TimeSeriesWriter
+
+    class Writer(TimeSeriesWriter):
+        def __enter__(self):
+            import h5py
+
+            self.h5_filename = str(self.filename.with_suffix(".h5"))
+            self.h5_file = h5py.File(self.h5_filename, "w")
+            return self
+
+    return Writer(path)
+
+
+def write_xdmf(ds, system, model, stage: Path, tick: Callable[[], None]) -> list[str]:
+    times = ds["time"].values.astype(float)
+    n = system.n
+    p0 = granule_frame(ds, system, 0)["points"]
+    with _time_series_writer(stage / "granules.xdmf") as w:
+        w.write_points_cells(p0, [("vertex", np.arange(n, dtype=np.int64)[:, None])])
+        for k, t in enumerate(times):
+            g = granule_frame(ds, system, k)
+            pts = g.pop("points")
+            w.write_data(float(t), point_data={"position": pts, "displacement": pts - p0, **g})
+            tick()
+    files = ["granules.h5", "granules.xdmf"]
+    if has_solid(ds, model):
+        with _time_series_writer(stage / "solid.xdmf") as w:
+            w.write_points_cells(solid_points(model), solid_cells(model))
+            for t, u, v, e in solid_frames(ds, model):
+                w.write_data(t, point_data={"displacement": u, "velocity": v}, cell_data={"energy_density": [e]})
+                tick()
+        files += ["solid.h5", "solid.xdmf"]
+    return files
+
+
+def write_extxyz(ds, system, stage: Path, tick: Callable[[], None]) -> list[str]:
+    species = [str(m) for m in ds["medium"].values] if "medium" in ds.coords else [lab.split(":")[0] for lab in system.labels]
+    n = system.n
+    with open(stage / "granules.extxyz", "w") as f:
+        for k, t in enumerate(ds["time"].values.astype(float)):
+            g = granule_frame(ds, system, k)
+            f.write(f"{n}\nProperties={EXTXYZ_PROPERTIES} Time={_fmt(t)} pbc=\"F F F\"\n")
+            p, v = g["points"], g["velocity"]
+            for i in range(n):
+                f.write(" ".join([species[i], *(_fmt(c) for c in p[i]), _fmt(g["radius"][i]), *(_fmt(c) for c in v[i]),
+                                  _fmt(g["omega"][i])]) + "\n")
+            tick()
+    return ["granules.extxyz"]
+
+
+def _long_csv(path: Path, ds, key: str, names: list[str], columns: list[str]) -> None:
+    """A long-format table: one row per output and `key` entry (granule, wall, contact)."""
+    import csv
+
+    times = ds["time"].values.astype(float)
+    labels = [str(s) for s in ds[key].values] if key in ds.coords else []
+    present = [n in ds for n in names]
+    with open(path, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["time", key, *columns])
+        if not labels or not all(present):
+            return
+        data = [ds[n].values.astype(float) for n in names]
+        for k, t in enumerate(times):
+            ts = _fmt(t)
+            for i, lab in enumerate(labels):
+                out.writerow([ts, lab, *(_fmt(d[k, i]) for d in data)])
+
+
+def ledger_names(ds) -> list[str]:
+    return [n for n, v in ds.data_vars.items()
+            if v.dims == ("time",) and (n.startswith(LEDGER_PREFIXES) or n in LEDGER_NAMES)]
+
+
+def write_csv(ds, stage: Path, tick: Callable[[], None]) -> list[str]:
+    import csv
+
+    cols = ["x", "y", "v_x", "v_y", "omega"]
+    _long_csv(stage / "traces.csv", ds, "granule", cols, cols)
+    tick()
+    _long_csv(stage / "walls.csv", ds, "wall", ["wall_force_normal", "wall_force_tangential"], ["normal", "tangential"])
+    tick()
+    _long_csv(stage / "contacts.csv", ds, "contact", ["contact_force_normal", "contact_force_tangential"],
+              ["normal", "tangential"])
+    tick()
+    names = ledger_names(ds)
+    data = [ds[n].values.astype(float) for n in names]
+    with open(stage / "energies.csv", "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["time", *names])
+        for k, t in enumerate(ds["time"].values.astype(float)):
+            out.writerow([_fmt(t), *(_fmt(d[k]) for d in data)])
+    tick()
+    return ["traces.csv", "walls.csv", "contacts.csv", "energies.csv"]
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: Callable[[], None] | None = None) -> list[Path]:
+    """Write the chosen `formats` of result `ds` into folder `out` (created if missing); returns
+    the paths written. `tick` is called once per frame or table written (see `count_steps`).
+    OSError when the folder cannot be written (what was already moved into place stays)."""
+    from .figures import model_of
+
+    tick = tick or (lambda: None)
+    formats = [f for f in FORMATS if f in set(formats)]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    _, system, model = model_of(ds)
+    stage = Path(tempfile.mkdtemp(prefix=f".granel-export.{os.getpid()}.", dir=out))
+    written = []
+    try:
+        files = []
+        if "vtk" in formats:
+            files += write_vtk(ds, system, model, stage, tick)
+        if "xdmf" in formats:
+            files += write_xdmf(ds, system, model, stage, tick)
+        if "extxyz" in formats:
+            files += write_extxyz(ds, system, stage, tick)
+        if "csv" in formats:
+            files += write_csv(ds, stage, tick)
+        # data files before the indexes (.pvd, .xdmf) that name them
+        for rel in sorted(files, key=lambda r: r.endswith((".pvd", ".xdmf"))):
+            target = out / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(stage / rel, target)
+            written.append(target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return written
