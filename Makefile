@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-slow test-all test-py install bench clean
+.PHONY: demo test test-slow test-all test-py test-pythons install bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,13 +28,25 @@ test-slow: install
 test-all: install
 	$(BIN)/python -m pytest -q
 
-# the quick subset on another interpreter present on this machine (make test-py PY=python3.13)
+# the quick subset on another interpreter present on this machine (make test-py PY=python3.13);
+# MARK= (empty) runs the whole suite there
 PY ?= python3.13
+MARK ?= not slow
 test-py:
 	$(PY) -m venv .venv-$(notdir $(PY))
 	.venv-$(notdir $(PY))/bin/python -m pip install --quiet --upgrade pip
 	.venv-$(notdir $(PY))/bin/python -m pip install --quiet -e '.[test]'
-	.venv-$(notdir $(PY))/bin/python -m pytest -q -m "not slow"
+	.venv-$(notdir $(PY))/bin/python -m pytest -q $(if $(MARK),-m "$(MARK)",)
+
+# the whole suite on every Python 3.11-3.13 this machine has (a pyenv shim alone does not count)
+test-pythons:
+	@for v in 3.11 3.12 3.13; do \
+	  py=""; \
+	  for c in python$$v $${PYENV_ROOT:-$$HOME/.pyenv}/versions/$$v*/bin/python$$v; do \
+	    if $$c -c "import sys" >/dev/null 2>&1; then py=$$c; break; fi; \
+	  done; \
+	  if [ -n "$$py" ]; then $(MAKE) test-py PY=$$py MARK= || exit 1; else echo "no Python $$v here"; fi; \
+	done
 
 bench: install
 	$(BIN)/python benchmarks/bench_granular.py
