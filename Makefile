@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-slow test-all test-py test-pythons install bench clean
+.PHONY: demo test test-slow test-all test-py test-pythons docs install bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -14,6 +14,12 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 install: $(VENV)/.installed
+
+# the documentation site (mkdocs-material, the API reference by mkdocstrings) into site/, strict:
+# a warning (a broken link, a missing page, an unresolved reference) fails it
+docs: install
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
 
 demo: install
 	$(BIN)/granel run paper --solid rigid --excite LSGM:3 --shock strong -o demo-out/paper-rigid-LSGM3-strong.nc
