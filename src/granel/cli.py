@@ -491,6 +491,31 @@ def bench(
         console.print(f"granel paper (no animations): {res['paper_study_s']:.1f} s")
 
 
+def _run_cases(title: str, n: int, run, scheduler, source, write_error: str):
+    """Run a sweep's n cases, `run(progress)`, under a progress bar: (its summary, the failed
+    cases). A scheduler, scenario or file error ends the command with its exit code (2 or 4)."""
+    from .sweep import SchedulerError
+
+    failed = []
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+        task = bar.add_task(title, total=n)
+
+        def progress(r):
+            if r.get("status") != "ok":
+                failed.append(r)
+            bar.update(task, advance=1)
+
+        try:
+            return run(progress), failed
+        except SchedulerError as e:
+            _fail(f"--scheduler {scheduler}: {e}", e.code)
+        except S.ScenarioError as e:
+            _fail(f"{source}: {e}")
+        except OSError as e:
+            _fail(f"{write_error} ({e})", 4)
+
+
 @app.command()
 def sweep(
     sweep_file: Path = typer.Argument(..., help="sweep TOML (see docs/sweeps.md)"),
@@ -503,7 +528,7 @@ def sweep(
     if workers < 1:
         _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
     from .paths import OutputPathError, check_folder_path
-    from .sweep import SchedulerError, SweepFileError, cases, load_sweep, run_sweep
+    from .sweep import SweepFileError, cases, load_sweep, run_sweep
 
     try:
         spec, _ = load_sweep(sweep_file)
@@ -516,24 +541,8 @@ def sweep(
     except OutputPathError as e:
         _fail(str(e), e.code)
     n = len(cases(spec))
-    failed = []
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
-        task = bar.add_task(f"sweep {spec.name}", total=n)
-
-        def progress(r):
-            if r.get("status") != "ok":
-                failed.append(r)
-            bar.update(task, advance=1)
-
-        try:
-            ds = run_sweep(sweep_file, out, workers, scheduler, progress)
-        except SchedulerError as e:
-            _fail(f"--scheduler {scheduler}: {e}", e.code)
-        except S.ScenarioError as e:
-            _fail(f"{sweep_file}: {e}")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the sweep's results ({e})", 4)
+    ds, failed = _run_cases(f"sweep {spec.name}", n, lambda progress: run_sweep(sweep_file, out, workers, scheduler, progress),
+                            scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
     metrics = [v for v in ds.data_vars if v != "status"]
     t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok, {len(failed)} failed")
     for m in metrics:
@@ -586,7 +595,7 @@ def spectrum(
 
     from .paths import OutputPathError, check_folder_path, check_result_path
     from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
-    from .sweep import SchedulerError, SweepSpec, check_spectrum, run_spec
+    from .sweep import SweepSpec, check_spectrum, run_spec
 
     if workers < 1:
         _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
@@ -625,24 +634,9 @@ def spectrum(
     except OutputPathError as e:
         _fail(str(e), e.code)
     n = len(freqs) * len(amps)
-    failed = []
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
-        task = bar.add_task(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", total=n)
-
-        def progress(r):
-            if r.get("status") != "ok":
-                failed.append(r)
-            bar.update(task, advance=1)
-
-        try:
-            summary = run_spec(spec, Path("."), work, workers, scheduler, progress)
-        except SchedulerError as e:
-            _fail(f"--scheduler {scheduler}: {e}", e.code)
-        except S.ScenarioError as e:
-            _fail(f"{scenario}: {e}")
-        except OSError as e:
-            _fail(f"-o {out}: cannot write the spectrum's runs in {work} ({e})", 4)
+    summary, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
+                                 lambda progress: run_spec(spec, Path("."), work, workers, scheduler, progress),
+                                 scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
     try:
         ds = write_spectrum(summary, spec.spectrum, out)
     except OSError as e:

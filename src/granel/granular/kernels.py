@@ -87,6 +87,26 @@ def one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
 
 
 @njit(cache=True, inline="always")
+def wall_contact(y, model, c, t):
+    """Granule-wall candidate c at time t: (touching, fx, fy, torque on the granule, viscous and
+    friction power), by `one_sided_force` against the wall where `wall_motion` puts it (its
+    overlap grows by the wall's displacement s, the granule's velocity is taken relative to the
+    wall's, s' n). The one law of `rhs` and `wall_forces`."""
+    walls, radius = model.walls, model.granules.radius
+    V = 3 * radius.shape[0]
+    i = walls.g[c]
+    w = walls.w[c]
+    sw, vw = wall_motion(walls, w, t)
+    delta = wall_overlap(y, i, w, radius, walls) + sw
+    if delta <= 0.0:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0
+    nx, ny = walls.normal[w, 0], walls.normal[w, 1]
+    fx, fy, tq, pv, pf = one_sided_force(y, radius, i, -nx, -ny, delta, y[V + 2 * i] - vw * nx, y[V + 2 * i + 1] - vw * ny,
+                                         walls.A[c], walls.G[c], model.law)
+    return True, fx, fy, tq, pv, pf
+
+
+@njit(cache=True, inline="always")
 def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
     """`one_sided_force` added to granule i's derivative; returns the (viscous, friction) power."""
     V = 3 * radius.shape[0]
@@ -225,29 +245,19 @@ def rhs(t, y, dy, model, motion, tau):
         p_fric -= ft * vt
     walls = model.walls
     p_in = 0.0
-    for c in range(walls.g.shape[0]):  # granule-rigid wall
+    for c in range(walls.g.shape[0]):  # granule-rigid wall (at rest, or moving: `wall_contact`)
+        touching, fx, fy, tq, pv, pf = wall_contact(y, model, c, t)
+        if not touching:
+            continue
         i = walls.g[c]
-        w = walls.w[c]
-        if walls.drive[w, 1] > 0.0:  # a moving wall: its contact is an external force, its power input work
-            sw, vw = wall_motion(walls, w, t)
-            delta = wall_overlap(y, i, w, radius, walls) + sw
-            if delta <= 0.0:
-                continue
-            nx, ny = walls.normal[w, 0], walls.normal[w, 1]
-            fx, fy, tq, _, _ = one_sided_force(y, radius, i, -nx, -ny, delta, y[V + 2 * i] - vw * nx,
-                                               y[V + 2 * i + 1] - vw * ny, walls.A[c], walls.G[c], law)
-            dy[V + 2 * i] += fx
-            dy[V + 2 * i + 1] += fy
-            dy[OM + i] += tq
+        dy[V + 2 * i] += fx
+        dy[V + 2 * i + 1] += fy
+        dy[OM + i] += tq
+        if walls.drive[walls.w[c], 1] > 0.0:  # a moving wall's contact is a load: its power is input work
             p_in += fx * y[V + 2 * i] + fy * y[V + 2 * i + 1] + tq * y[OM + i]
-            continue
-        delta = wall_overlap(y, i, w, radius, walls)
-        if delta <= 0.0:
-            continue
-        pv, pf = _one_sided(dy, y, radius, i, -walls.normal[w, 0], -walls.normal[w, 1], delta, y[V + 2 * i], y[V + 2 * i + 1],
-                            walls.A[c], walls.G[c], law)
-        p_visc += pv
-        p_fric += pf
+        else:
+            p_visc += pv
+            p_fric += pf
     points = model.points
     for c in range(points.g.shape[0]):  # granule-solid contact points (moving, fixed normal)
         i = points.g[c]
@@ -428,24 +438,14 @@ def granule_energies(y, model, su):
 @njit(cache=True)
 def wall_forces(y, model, out, t):
     """The force each rigid wall takes from the granules at time t (out (nw, 2), x and y), the
-    opposite of the wall contacts' forces on the granules (`one_sided_force`, as in `rhs`, a
-    moving wall where `wall_motion` puts it)."""
-    radius = model.granules.radius
-    n = radius.shape[0]
+    opposite of the wall contacts' forces on the granules (`wall_contact`, as in `rhs`)."""
     walls = model.walls
     out[:, :] = 0.0
     for c in range(walls.g.shape[0]):
-        i = walls.g[c]
-        w = walls.w[c]
-        sw, vw = wall_motion(walls, w, t)
-        delta = wall_overlap(y, i, w, radius, walls) + sw
-        if delta <= 0.0:
-            continue
-        nx, ny = walls.normal[w, 0], walls.normal[w, 1]
-        fx, fy, _, _, _ = one_sided_force(y, radius, i, -nx, -ny, delta, y[3 * n + 2 * i] - vw * nx,
-                                          y[3 * n + 2 * i + 1] - vw * ny, walls.A[c], walls.G[c], model.law)
-        out[w, 0] -= fx
-        out[w, 1] -= fy
+        touching, fx, fy, _, _, _ = wall_contact(y, model, c, t)
+        if touching:
+            out[walls.w[c], 0] -= fx
+            out[walls.w[c], 1] -= fy
 
 
 @njit(cache=True, inline="always")
