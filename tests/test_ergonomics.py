@@ -119,6 +119,78 @@ def test_a_hexagonal_medium_anywhere():
     assert walls["SSGM:top"].p0[1] == pytest.approx(y.max() + 0.005)
 
 
+GROWTH_MAP = {"right": (1, 0), "left": (-1, 0), "up": (0, 1), "down": (0, -1)}
+
+
+def _box(grow: str, *more: str) -> S.Scenario:
+    """The paper's SSGM (R = 5 mm, columns 5, 4, 5) away from any solid, grown from a face line
+    through the origin, 0.1 mm from its first column, and closed by all four walls."""
+    channel = '"left", "right"' if grow in ("up", "down") else '"bottom", "top"'
+    return S.load("paper", ['solid.kind="none"', "media.0=-", 'media.0.side="none"', f'media.0.grow="{grow}"',
+                            f'media.0.walls=[{channel}, "outer", "face"]', "media.0.gap=0.0001",
+                            "media.0.outer_wall=-", 'excitations.0.granule="SSGM:C"',
+                            "excitations.0.direction=[0.0, 1.0]", *more])
+
+
+@pytest.mark.parametrize("grow", ["left", "up", "down"])
+def test_a_hexagonal_medium_grows_in_any_direction(grow):
+    """The same packing grown left, up or down is the rightward one mapped by the reflection that
+    takes +x to the growth direction: granules (same labels, same order) and the four walls
+    (names, segments, inward normals) to 1e-15 m."""
+    import numpy as np
+
+    from granel.scenario.build import build_granular
+
+    def geometry(sc):
+        system, _, _ = build_granular(sc, sc.base)
+        walls = {w.name: (np.array([w.p0, w.p1]), np.array(w.normal)) for w in system.walls}
+        return system, walls
+
+    ref, ref_walls = geometry(_box("right"))
+    got, got_walls = geometry(_box(grow))
+    gx, gy = GROWTH_MAP[grow]
+    # right -> this growth: (x, y) -> x e_grow + y e_along, e_along = +y for left, +x for up/down
+    M = np.array([[gx, 0.0], [0.0, 1.0]]) if grow == "left" else np.array([[0.0, 1.0], [gy, 0.0]])
+    assert got.labels == ref.labels
+    np.testing.assert_allclose(got.pos0, ref.pos0 @ M.T, atol=1e-15)
+    rename = {"bottom": "left", "top": "right"} if grow in ("up", "down") else {}
+    assert len(got_walls) == 4
+    for name, (seg, nrm) in ref_walls.items():
+        side = name.split(":")[1]
+        seg2, nrm2 = got_walls[f"SSGM:{rename.get(side, side)}"]
+        np.testing.assert_allclose(sorted(map(tuple, seg2)), sorted(map(tuple, seg @ M.T)), atol=1e-15)
+        np.testing.assert_allclose(nrm2, M @ nrm, atol=0)
+
+
+@pytest.mark.parametrize("grow", ["right", "left", "up", "down"])
+def test_a_granule_rattles_elastically_in_a_closed_box(grow):
+    """One steel granule (R = 5 mm) between its face wall, 0.1 mm away, and its outer wall, which
+    it touches, thrown at 1 m/s into the outer wall (no friction, no damping): it bounces off the
+    outer wall, then the face wall, and moves at +1 m/s along the growth again, its speed kept
+    to 1e-6 and the two walls (and no other) having pushed it, in every growth direction."""
+    import numpy as np
+
+    from granel.run import run_scenario
+
+    gx, gy = GROWTH_MAP[grow]
+    sc = _box(grow, "media.0.columns=[1]", 'media.0.labels=["g"]', "excitations=-", "contact.mu=0.0",
+              "contact.alpha_n=0.0", 'simulation.duration="200us"', 'simulation.output_every="1us"',
+              f'initial_velocities=[{{granule = "SSGM:g", v = [{float(gx)}, {float(gy)}]}}]')
+    assert sc.media[0].columns == [1]
+    ds = run_scenario(sc)
+    vx, vy = ds["v_x"].values[:, 0], ds["v_y"].values[:, 0]
+    along = vx * gx + vy * gy
+    t = ds["time"].values
+    assert along[0] == pytest.approx(1.0, abs=1e-12)
+    mid = (t > 30e-6) & (t < 120e-6)  # between the bounces (t_c = 27 us; 0.1 mm at 1 m/s)
+    np.testing.assert_allclose(along[mid], -1.0, atol=1e-6)
+    assert along[-1] == pytest.approx(1.0, abs=1e-6)  # measured 4.4e-8 at the default tolerances
+    np.testing.assert_allclose(vx * gy - vy * gx, 0.0, atol=1e-12)
+    push = np.abs(ds["wall_force_normal"].values).max(axis=0)
+    names = [str(n) for n in ds["wall"].values]
+    assert {n for n, f in zip(names, push) if f > 0} == {"SSGM:outer", "SSGM:face"}
+
+
 def test_one_version():
     """The package, its installed metadata and CITATION.cff give the same version."""
     from importlib.metadata import version
@@ -129,3 +201,47 @@ def test_one_version():
     cff = (Path(__file__).resolve().parents[1] / "CITATION.cff").read_text()
     line = next(x for x in cff.splitlines() if x.startswith("version:"))
     assert line.split(":", 1)[1].strip() == granel.__version__ == version("granel")
+
+
+@pytest.mark.parametrize("over, says", [
+    (['media.1.grow="up"'], "grows to the right"),
+    (['media.1.side="none"'], "needs a growth direction"),
+    (['media.1.face_y=0.1'], "face_y: not used"),
+    (['media.1.side="none"', 'media.1.grow="down"', "media.1.center_y=0.1"], "center_y: not used"),
+    (['media.1.walls=["left"]', "media.1.channel_walls=-", "media.1.outer_wall=-"], "'left' is not a wall"),
+    (['media.1.walls=["bottom", "face"]', "media.1.channel_walls=-", "media.1.outer_wall=-"], "solid's face"),
+    (['media.1.walls=["bottom", "top"]'], "contradicts outer_wall = true"),
+    (['media.1.walls=["north"]'], "media.1.walls.0"),
+    (['media.1.walls=["top", "top"]', "media.1.channel_walls=-", "media.1.outer_wall=-"], "names a wall twice"),
+])
+def test_a_misplaced_medium_is_refused_naming_the_field(over, says):
+    with pytest.raises(S.ScenarioError) as err:
+        S.load("paper", over)
+    assert says in str(err.value) and "media.1" in str(err.value)
+
+
+def test_a_scenario_without_contact_says_the_paper_law_applies(tmp_path):
+    """Leaving out [contact] runs the paper's friction and damping: `granel run` says so (on
+    stderr, once) and the result records them; a scenario with [contact] gets no note."""
+    (tmp_path / "two.csv").write_text("label,x,y,radius\nA,0.0,0.0,0.005\nB,0.0101,0.0,0.005\n")
+    body = """name = "two"
+[simulation]
+duration = "20us"
+[solid]
+kind = "none"
+[[media]]
+name = "G"
+side = "none"
+granules_file = "two.csv"
+"""
+    (tmp_path / "two.toml").write_text(body)
+    res = runner.invoke(app, ["run", str(tmp_path / "two.toml"), "-o", str(tmp_path / "a.nc")])
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert text.count("no [contact] table") == 1 and "mu = 0.099" in text and "alpha_n = 0.006313" in text
+    from granel.results import read_netcdf
+
+    assert "mu = 0.099" in read_netcdf(tmp_path / "a.nc").attrs["scenario"]
+    (tmp_path / "two.toml").write_text(body + "[contact]\nmu = 0.0\n")
+    res = runner.invoke(app, ["run", str(tmp_path / "two.toml"), "-o", str(tmp_path / "b.nc")])
+    assert res.exit_code == 0 and "[contact]" not in res.output

@@ -51,6 +51,15 @@ def _load_or_fail(name: str, overrides: list[str], shock=None) -> S.Scenario:
         _fail(str(e))
 
 
+def _note_contact_defaults(sc: S.Scenario) -> None:
+    """A scenario without [contact] runs with the paper's friction and damping: say so, once."""
+    if "contact" not in sc.model_fields_set:
+        c = sc.contact
+        console.print(f"[yellow]note:[/] no \\[contact] table: the paper's contact law applies (mu = {c.mu:g}, "
+                      f"alpha_n = {c.alpha_n:g}, k_s = {c.k_s:g} s/m); write \\[contact] with mu = 0.0 and "
+                      "alpha_n = 0.0 for frictionless, undamped contacts")
+
+
 def load_scenario(name: str, overrides: list[str], shock: str | float | None = None) -> S.Scenario:
     """A scenario with overrides; `shock` (a level name or a peak force [N]) replaces the first
     excitation's `shock` and `fmax`."""
@@ -163,6 +172,7 @@ def run(
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
     wall_limit = _wall_seconds(max_wall, "--max-wall")
     sc = _load_or_fail(scenario, ov, _shock_level(shock))
+    _note_contact_defaults(sc)
     ckpt = _check_run_paths(output, scenario, resume, sc.simulation.checkpoint_every > 0)
     from .results import remove_stale_temporaries
 

@@ -1,9 +1,10 @@
-"""Granule packings: hexagonal columns beside a solid, with the paper's labels.
+"""Granule packings: hexagonal columns beside a solid or anywhere, with the paper's labels.
 
 Geometry conventions (MODEL.md section 1): x is normal to the solid, y along it.
 A medium on the `left` of the solid occupies x < face; on the `right`, x > face.
 Columns are counted from the solid outward (column 0 touches the solid); labels run from
-the outermost column inward, bottom to top, as in the paper (1..14 and A..N).
+the outermost column inward, bottom to top, as in the paper (1..14 and A..N). A medium away
+from the solid (side = "none") grows from a face line in any of the four axis directions.
 """
 
 from __future__ import annotations
@@ -71,43 +72,74 @@ def numeric_labels(n: int) -> list[str]:
     return [str(k + 1) for k in range(n)]
 
 
+GROWTHS = ("left", "right", "up", "down")
+
+
+def channel_names(grow: str) -> tuple[str, str]:
+    """The two channel walls' names of a medium growing along `grow`: the walls that run along
+    the growth direction, at either end of column 0."""
+    return ("bottom", "top") if grow in ("left", "right") else ("left", "right")
+
+
 def hexagonal_columns(
     name: str,
     columns: list[int],
     radius: float,
     material: Material,
     side: str,
-    face_x: float,
-    center_y: float,
+    face: float,
+    center: float,
     labels: str | list[str] = "numeric",
-    channel_walls: bool = True,
-    outer_wall: bool = False,
+    walls: tuple[str, ...] = ("bottom", "top"),
     gap: float = 0.0,
+    grow: str | None = None,
 ) -> Medium:
-    """Hexagonally packed, initially touching columns parallel to a vertical solid face.
+    """Hexagonally packed, initially touching columns parallel to a face line.
 
-    columns[c] is the number of granules of column c (c = 0 touches the face). Column c sits at
-    x = face -/+ (R + gap + c R sqrt(3)) and is shifted by R in y when c is odd; column 0 is
-    centred on `center_y`. Channel walls (y = bottom - R and top + R of column 0) and an optional
-    outer wall close the medium.
+    The medium grows from the face along `grow` (left, right: the face is the line x = face and
+    columns are vertical; up, down: the face is y = face and the "columns" are horizontal rows);
+    a medium beside the solid grows away from it (`grow` = `side`). In the frame (u along the
+    growth, s along the face), columns[c] granules sit in column c (c = 0 nearest the face) at
+    u = R + gap + c R sqrt(3), shifted by R along the face when c is odd; column 0 is centred on
+    `center` (y for left/right growth, x for up/down).
+
+    `walls` names the rigid walls that close it: the two channel walls along the growth, at the
+    ends of column 0 (bottom and top for left/right growth, left and right for up/down), `outer`
+    beyond the last column and `face` on the face line (only for a medium not beside a solid).
+    Labels run from the outermost column inward, then along +s (bottom to top, or left to right),
+    as in the paper (1..14 and A..N).
     """
-    if side not in ("left", "right"):
-        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    grow = side if grow is None else grow
+    if side not in ("left", "right", "none"):
+        raise ValueError(f"side must be 'left', 'right' or 'none', got {side!r}")
+    if grow not in GROWTHS:
+        raise ValueError(f"grow must be one of {list(GROWTHS)}, got {grow!r}")
+    if side != "none" and grow != side:
+        raise ValueError(f"grow = {grow!r}: a medium on the {side} of the solid grows to the {side}")
     if not columns or any(c < 1 for c in columns):
         raise ValueError(f"columns must be positive counts, got {columns}")
+    known = channel_names(grow) + ("outer", "face")
+    for w in walls:
+        if w not in known:
+            raise ValueError(f"walls: {w!r} is not a wall of a medium growing {grow}; choose from {list(known)}")
+    if "face" in walls and side != "none":
+        raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
     R = float(radius)
-    sgn = -1.0 if side == "left" else 1.0
-    col_pos = []
+    sgn = -1.0 if grow in ("left", "down") else 1.0
+    local = []  # (u, s) of each column, u the distance from the face
     for c, count in enumerate(columns):
-        x = face_x + sgn * (R + gap + c * R * math.sqrt(3.0))
-        # y = center_y + j R with j on column c's lattice (j = n0 - 1 + c mod 2), centred if possible
+        u = R + gap + c * R * math.sqrt(3.0)
+        # s = center + j R with j on column c's lattice (j = n0 - 1 + c mod 2), centred if possible
         js = [2 * k - (count - 1) for k in range(count)]
         if (js[0] - (columns[0] - 1 + c)) % 2:
             js = [j + 1 for j in js]
-        col_pos.append(np.array([[x, center_y + j * R] for j in js]))
-    # label order: outermost column first, bottom to top
-    ordered = [p for p in reversed(col_pos)]
-    pos = np.vstack(ordered)
+        local.append(np.array([[u, center + j * R] for j in js]))
+    us = np.vstack(list(reversed(local)))  # label order: outermost column first, then along +s
+
+    def frame(u, s):  # (u, s) -> (x, y)
+        return (face + sgn * u, s) if grow in ("left", "right") else (s, face + sgn * u)
+
+    pos = np.array([frame(u, s) for u, s in us])
     n = len(pos)
     if isinstance(labels, str):
         if labels == "numeric":
@@ -121,20 +153,25 @@ def hexagonal_columns(
         if len(lab) != n:
             raise ValueError(f"{len(lab)} labels given for {n} granules")
     contact = list(range(n - columns[0], n))
-    walls = []
-    x_in = face_x
-    x_out = face_x + sgn * (R + gap + (len(columns) - 1) * R * math.sqrt(3.0) + R)
-    xa, xb = min(x_in, x_out), max(x_in, x_out)
-    if channel_walls:
-        y_bot = float(pos[:, 1].min() - R)
-        y_top = float(pos[:, 1].max() + R)
-        walls.append(Wall((xa, y_bot), (xb, y_bot), (0.0, 1.0), name, f"{name}:bottom"))
-        walls.append(Wall((xa, y_top), (xb, y_top), (0.0, -1.0), name, f"{name}:top"))
-    if outer_wall:
-        y_bot = float(pos[:, 1].min() - R)
-        y_top = float(pos[:, 1].max() + R)
-        walls.append(Wall((x_out, y_bot), (x_out, y_top), (-sgn, 0.0), name, f"{name}:outer"))
-    return Medium(name, lab, pos, np.full(n, R), material, side, walls, contact)
+    u_out = R + gap + (len(columns) - 1) * R * math.sqrt(3.0) + R
+    s_lo, s_hi = float(us[:, 1].min() - R), float(us[:, 1].max() + R)
+    e_s = (0.0, 1.0) if grow in ("left", "right") else (1.0, 0.0)  # along the face, +s
+    along = (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)  # along the growth
+    made = []
+    lo, hi = channel_names(grow)
+    if lo in walls:  # the channel wall at s_lo faces +s, the one at s_hi faces -s
+        made.append((lo, frame(0.0, s_lo), frame(u_out, s_lo), e_s))
+    if hi in walls:
+        made.append((hi, frame(0.0, s_hi), frame(u_out, s_hi), (-e_s[0], -e_s[1])))
+    if "outer" in walls:
+        made.append(("outer", frame(u_out, s_lo), frame(u_out, s_hi), (-along[0], -along[1])))
+    if "face" in walls:
+        made.append(("face", frame(0.0, s_lo), frame(0.0, s_hi), along))
+    out = []
+    for w, a, b, nrm in made:
+        a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
+        out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
+    return Medium(name, lab, pos, np.full(n, R), material, side, out, contact)
 
 
 def medium_from_table(name: str, rows: list[dict], material: Material, side: str = "none",

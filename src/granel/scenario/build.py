@@ -47,17 +47,18 @@ def build_media(sc: Scenario, base: Path | None = None):
             if np.any(med.radius <= 0):
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: radius must be positive")
         else:
-            if solid is not None:
+            if m.grow in ("up", "down"):
+                face, center = m.face_y or 0.0, m.center_x or 0.0
+            elif solid is not None and m.side != "none":
                 face = solid.x0 if m.side == "left" else solid.x0 + solid.width
-                cy = m.center_y if m.center_y is not None else solid.y0 + 0.5 * solid.length
+                center = m.center_y if m.center_y is not None else solid.y0 + 0.5 * solid.length
             else:
-                face = 0.0
-                cy = m.center_y if m.center_y is not None else 0.0
+                face, center = 0.0, m.center_y if m.center_y is not None else 0.0
             if m.face_x is not None:
                 face = m.face_x
             try:
-                med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, cy, m.labels,
-                                        m.channel_walls, m.outer_wall, m.gap)
+                med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, center, m.labels,
+                                        m.wall_names(), m.gap, m.grow)
             except ValueError as e:
                 raise ScenarioError(f"media.{k}: {e}") from None
         media.append(med)

@@ -155,9 +155,17 @@ class MediumSpec(_Strict):
     center_y: float | None = Field(None, description="y of column 0's centre (default: the solid's mid-length, or 0)")
     face_x: float | None = Field(None, description="x of the face column 0 touches (default: the solid's face on this "
                                                    "side, or 0): a medium anywhere")
+    grow: Literal["left", "right", "up", "down"] | None = Field(
+        None, description="direction the columns stack away from the face (default: the side; required with "
+                          "side = 'none'); up/down: horizontal rows from the face line y = face_y")
+    face_y: float | None = Field(None, description="y of the face line of a medium growing up or down (default 0)")
+    center_x: float | None = Field(None, description="x of column 0's centre for a medium growing up or down (default 0)")
     labels: Union[Literal["numeric", "alpha"], list[str]] = "numeric"
     channel_walls: bool = True
     outer_wall: bool = False
+    walls: list[Literal["bottom", "top", "left", "right", "outer", "face"]] | None = Field(
+        None, description="the rigid walls that close the medium, instead of channel_walls/outer_wall: the channel "
+                          "walls (bottom/top for left/right growth, left/right for up/down), outer, face")
     gap: float = Field(0.0, ge=0)
     granules_file: str | None = None
 
@@ -179,9 +187,46 @@ class MediumSpec(_Strict):
         if self.granules_file is None:
             if self.columns is None or self.radius is None:
                 raise ValueError("a medium needs either 'columns' and 'radius' (hexagonal packing) or 'granules_file'")
-            if self.side == "none":
-                raise ValueError("a hexagonal packing needs side = 'left' or 'right' of the solid")
+            if self.side == "none" and self.grow is None:
+                raise ValueError("grow: a hexagonal packing away from the solid (side = 'none') needs a growth "
+                                 "direction: left, right, up or down")
+            if self.side != "none" and self.grow not in (None, self.side):
+                raise ValueError(f"grow = {self.grow!r}: a medium on the {self.side} of the solid grows to the "
+                                 f"{self.side} (use side = 'none' for a medium elsewhere)")
+            vertical = self.grow in ("up", "down")
+            for key in (("face_x", "center_y") if vertical else ("face_y", "center_x")):
+                if getattr(self, key) is not None:
+                    raise ValueError(f"{key}: not used by a medium growing {self.grow or self.side}; "
+                                     + ("give face_y and center_x" if vertical else "give face_x and center_y"))
+            if self.walls is not None:
+                lo, hi = ("left", "right") if vertical else ("bottom", "top")
+                given = {"channel_walls": (lo, hi), "outer_wall": ("outer",)}
+                for key, names in given.items():
+                    if key in self.model_fields_set and getattr(self, key) != all(w in self.walls for w in names):
+                        raise ValueError(f"walls = {self.walls} contradicts {key} = "
+                                         f"{str(getattr(self, key)).lower()}: give one of them")
+                for w in self.walls:
+                    if w not in (lo, hi, "outer", "face"):
+                        raise ValueError(f"walls: {w!r} is not a wall of a medium growing {self.grow or self.side}; "
+                                         f"choose from {[lo, hi, 'outer', 'face']}")
+                if "face" in self.walls and self.side != "none":
+                    raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' "
+                                     "has a face wall")
+                if len(set(self.walls)) != len(self.walls):
+                    raise ValueError(f"walls: {self.walls} names a wall twice")
+        else:
+            for key in ("grow", "face_y", "center_x", "walls"):
+                if getattr(self, key) is not None:
+                    raise ValueError(f"{key}: a medium from granules_file takes its geometry from the file "
+                                     "(add walls with [[walls]])")
         return self
+
+    def wall_names(self) -> tuple[str, ...]:
+        """The walls of a hexagonal packing: `walls`, or the channel and outer walls' switches."""
+        if self.walls is not None:
+            return tuple(self.walls)
+        lo, hi = ("left", "right") if self.grow in ("up", "down") else ("bottom", "top")
+        return ((lo, hi) if self.channel_walls else ()) + (("outer",) if self.outer_wall else ())
 
 
 class WallMotionSpec(_Strict):
