@@ -1,6 +1,7 @@
 """`granel export`: every format read back (meshio for VTU and XDMF, plain parsing for extended XYZ
 and CSV) equals the result file (granules) or the solid reconstruction the movies use (plate and
-beam nodal displacements); hostile input gives a clean message and the documented exit code."""
+beam nodal displacements, their stress); the stress meets closed forms (a plane-stress patch test,
+a beam in pure bending); hostile input gives a clean message and the documented exit code."""
 
 import csv
 import re
@@ -15,9 +16,11 @@ from typer.testing import CliRunner
 
 from granel.animate import solid_states
 from granel.cli import app
-from granel.export import EXTXYZ_PROPERTIES, ExportError, parse_formats
+from granel.export import EXTXYZ_PROPERTIES, ExportError, elastic_constants, parse_formats, solid_stress
 from granel.figures import model_of
 from granel.results import read_netcdf
+from granel.solid.beam import build_beam
+from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate, plane_stress_forms
 
 runner = CliRunner()
 RTOL = 1e-12
@@ -186,6 +189,87 @@ def test_solid_xdmf_round_trip(runs, solid):
             close(t, ds["solid_time"].values[k])
             close(pd["displacement"][:, :2], U[k])
             close(pd["velocity"][:, :2], V[k])
+
+
+# --------------------------------------------------------------------------------------------
+# the solid's stress
+
+E_STEEL, NU_STEEL, RHO_STEEL = 200e9, 0.3, 7850.0
+PLATE_STRESS = ("stress_xx", "stress_yy", "stress_xy", "von_mises")
+
+
+def test_plate_stress_patch_test():
+    """A uniform strain u = exx x, v = eyy y + gxy x imposed on every node of a Q8 plate with rigid
+    layers gives, in every cell (the two under each layer included), the plane-stress law
+    sigma = E / (1 - nu^2) [[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]] (exx, eyy, gxy) and its
+    von Mises stress; the strain energy of the plate's own form is 1/2 sigma . eps per volume."""
+    layers = [LayerSpec("A", "left", 0.05, 1e-3), LayerSpec("B", "right", 0.04, 5e-4)]
+    h = 1e-3
+    m = assemble_plate(0.0, 0.0, 0.01, 0.1, h, E_STEEL, NU_STEEL, RHO_STEEL, layers, PlateMesh(4, 2.0, 5e-3))
+    assert m.info["rigid_layers"]
+    # the cells under a layer: three of their nodes on the layer's edge segment
+    X, Y = m.nodes.T
+    on_layer = np.zeros(len(X), bool)
+    for lay in layers:
+        on_layer |= (np.abs(X - (0.0 if lay.edge == "left" else 0.01)) < 1e-12) & (np.abs(Y - lay.y) <= lay.length / 2 + 1e-12)
+    under = on_layer[m.elements].sum(axis=1) == 3
+    assert under.sum() == 2 * len(layers)
+    D = E_STEEL / (1 - NU_STEEL**2) * np.array([[1, NU_STEEL, 0], [NU_STEEL, 1, 0], [0, 0, (1 - NU_STEEL) / 2]])
+    strain_energy = plane_stress_forms(E_STEEL, NU_STEEL, RHO_STEEL, h)[2]
+    for exx, eyy, gxy in ((1e-4, -3e-4, 2e-4), (-2e-5, 5e-5, -7e-5)):
+        x = np.zeros(m.T.shape[0])
+        x[m.node_dofs[0]] = exx * X
+        x[m.node_dofs[1]] = eyy * Y + gxy * X
+        s = solid_stress(m, E_STEEL, NU_STEEL, x)
+        assert sorted(s) == sorted(PLATE_STRESS) and all(a.shape == (m.nelements,) for a in s.values())
+        sxx, syy, sxy = D @ [exx, eyy, gxy]
+        vm = np.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * sxy**2)
+        for name, want in zip(PLATE_STRESS, (sxx, syy, sxy, vm)):
+            np.testing.assert_allclose(s[name], want, rtol=1e-9, atol=0, err_msg=name)
+        w = strain_energy.elemental(m.basis, u=m.basis.interpolate(x))
+        np.testing.assert_allclose(w, 0.5 * (sxx * exx + syy * eyy + sxy * gxy) * m.element_volume, rtol=1e-9, atol=0)
+
+
+def test_beam_bending_stress_pure_bending():
+    """w = a y^2 (rotations 2 a y) on every node: the outer-fibre stress E (h/2) |2a| in every
+    element, h the section depth (the beam's width); a rigid motion w = b + c y: no stress."""
+    W, L, H = 0.01, 0.1, 0.001
+    beam = build_beam(0.0, 0.02, W, L, H, E_STEEL, RHO_STEEL, [("c", "left", 0.07)], 40)
+    y = beam.nodes[:, 1]
+    for a in (0.37, -2.5):
+        x = np.zeros(beam.T.shape[0])
+        x[0::2], x[1::2] = a * y**2, 2 * a * y
+        s = solid_stress(beam, E_STEEL, NU_STEEL, x)
+        assert list(s) == ["bending_stress"] and s["bending_stress"].shape == (beam.nelements,)
+        np.testing.assert_allclose(s["bending_stress"], E_STEEL * W / 2 * abs(2 * a), rtol=1e-9, atol=0)
+    x[0::2], x[1::2] = 3e-4 + 0.02 * y, 0.02
+    assert np.all(solid_stress(beam, E_STEEL, NU_STEEL, x)["bending_stress"] == 0)
+
+
+def solid_outputs(ds):
+    n = ds.sizes["solid_time"]
+    return sorted({0, n // 2, n - 1})
+
+
+@pytest.mark.parametrize("solid,names", [("plate", PLATE_STRESS), ("beam", ("bending_stress",))])
+def test_solid_stress_round_trip(runs, solid, names):
+    """The stress read back from the VTU series and the XDMF file equals `solid_stress` on the
+    movies' reconstruction of the same output."""
+    ds, folder = runs[solid]
+    sc, _, model = model_of(ds)
+    ks = solid_outputs(ds)
+    Q, _ = solid_states(ds, ds["solid_time"].values[ks])
+    want = [solid_stress(model, *elastic_constants(sc), model.T @ q) for q in Q]
+    assert max(np.abs(w[names[0]]).max() for w in want) > 0  # the shock has loaded the solid
+    entries = pvd_entries(folder / "solid.pvd")
+    with meshio.xdmf.TimeSeriesReader(folder / "solid.xdmf") as r:
+        r.read_points_cells()
+        for k, w in zip(ks, want):
+            vtu = meshio.read(folder / entries[k][1]).cell_data
+            _, _, xdmf = r.read_data(k)
+            for name in names:
+                close(vtu[name][0], w[name])
+                close(xdmf[name][0], w[name])
 
 
 def test_rigid_solid_has_no_solid_files(runs):

@@ -667,8 +667,9 @@ def export(
                                                                       "comma separated; default: all four)"),
 ):
     """Export a run for ParaView (VTU + PVD, XDMF), OVITO (extended XYZ) and spreadsheets (CSV):
-    the granules at every output and the plate's or beam's nodal displacement, velocity and
-    element energy density at every stored solid output."""
+    the granules at every output and the plate's or beam's nodal displacement, velocity, element
+    energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
+    stored solid output."""
     from .export import ExportError, count_steps, export_result, parse_formats, read_export_result
     from .figures import model_of
 

@@ -6,7 +6,8 @@ Formats (any combination):
   the time series ``granules.pvd`` (radius, velocity, omega and kinetic energy as point data: show
   them as sphere glyphs scaled by radius); a plate or beam as one VTU per stored solid output
   (``solid/solid_NNNNNN.vtu``, Q8 quadrilaterals or the beam's centre line as line cells) with
-  ``solid.pvd``: nodal displacement and velocity, element energy density.
+  ``solid.pvd``: nodal displacement and velocity as point data; element energy density and the
+  stress as cell data (see *Stress* below).
 * ``xdmf``: the same through meshio's XDMF time-series writer (``granules.xdmf`` + ``.h5``,
   ``solid.xdmf`` + ``.h5``). An XDMF time series has one fixed mesh, so the granules' points are
   their initial centres; their centres at each output are the point data ``position`` (and
@@ -24,6 +25,23 @@ The solid's nodal fields are rebuilt with the functions the movies use: the soli
 result's scenario text (`figures.model_of`), the reduced state at the stored solid outputs
 (`animate.solid_states`, i.e. `analysis.solid.reduced_states`), the nodal displacement with the
 model's `full_displacement` and the element energy density with `analysis.density.solid_energy_density`.
+
+Stress (cell data, Pa; `solid_stress`, from the full nodal DOF vector x = T q and the Young's
+modulus E and Poisson ratio nu of the solid's material in the result's scenario):
+
+* plate: ``stress_xx``, ``stress_yy``, ``stress_xy``, the plane-stress Cauchy stress averaged over
+  each Q8 element (the area-weighted mean of its values at the 3 x 3 Gauss points of the plate's
+  own scikit-fem basis, the rule that assembles K), with the plate's law sigma = 2 mu eps +
+  lambda tr(eps) I, lambda = E nu / (1 - nu^2), mu = E / (2 (1 + nu)) (eq. 7;
+  `solid.plate.plane_stress_law`, the law its stiffness form uses); and ``von_mises``, sqrt(sxx^2 - sxx syy + syy^2 + 3 sxy^2)
+  of those mean components. A rigid layer is a constraint on the five edge nodes of two elements,
+  not a cell: those two elements are elastic Q8 cells whose outer side moves rigidly (the contact
+  force enters the plate through them), and their stress is computed like any other.
+* beam: ``bending_stress``, the outer-fibre bending stress E (h/2) |w''| at each element's
+  centre, w'' from the element's Hermite cubic (there w'' = (theta_2 - theta_1) / l), h the
+  section depth in the bending plane (the solid's width; the out-of-plane thickness only scales
+  the area). The beam is axially rigid (no axial DOF), so there is no axial stress.
+* rigid solid or no solid: no solid files, no stress.
 """
 
 from __future__ import annotations
@@ -117,9 +135,64 @@ def solid_cells(model) -> list[tuple[str, np.ndarray]]:
     return [(kind, np.asarray(model.elements, dtype=np.int64))]
 
 
-def solid_frames(ds, model) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
-    """(time, nodal displacement (nn, 3), nodal velocity (nn, 3), element energy density (ne,))
-    at each stored solid output."""
+def elastic_constants(sc) -> tuple[float, float]:
+    """(Young's modulus E [Pa], Poisson ratio nu) of the material of scenario `sc`'s solid."""
+    from .scenario.build import present_solid
+
+    mat = sc.materials[present_solid(sc).material]
+    return float(mat.E), float(mat.nu)
+
+
+def plate_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
+    """The plate's element-mean plane-stress Cauchy stress and von Mises stress [Pa], (ne,) each,
+    from the full nodal DOF vector x (= T q, scikit-fem's DOF order; see the module docstring).
+    Reuses the plate's basis (Q8 shape-function gradients at its Gauss points) and the plate's
+    own plane-stress law (`solid.plate.plane_stress_law`, eq. 7)."""
+    from skfem.helpers import sym_grad
+
+    from .solid.plate import plane_stress_law
+
+    basis = model.basis
+    S = plane_stress_law(E, nu)(sym_grad(basis.interpolate(np.asarray(x, float))))  # (2, 2, ne, nqp)
+    dx = basis.dx  # quadrature weight x Jacobian (ne, nqp)
+    S = (S * dx).sum(axis=-1) / dx.sum(axis=-1)
+    sxx, syy, sxy = S[0, 0], S[1, 1], S[0, 1]
+    vm = np.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * sxy**2)
+    return {"stress_xx": sxx, "stress_yy": syy, "stress_xy": sxy, "von_mises": vm}
+
+
+# second derivatives d^2/ds^2 of the Hermite cubics N1 = 1 - 3s^2 + 2s^3, N2 = l (s - 2s^2 + s^3),
+# N3 = 3s^2 - 2s^3, N4 = l (s^3 - s^2) at the element centre s = 1/2: (0, -l, 0, l); d/dy = (1/l) d/ds
+HERMITE_D2_CENTRE = (0.0, -1.0, 0.0, 1.0)  # times (1/l^2, 1/l, 1/l^2, 1/l)
+
+
+def beam_stress(model, E: float, x: np.ndarray) -> dict[str, np.ndarray]:
+    """The beam's outer-fibre bending stress E (h/2) |w''| [Pa] at each element's centre, (ne,),
+    from the full DOF vector x (= T q: deflection, rotation dw/dy at each node), w'' from the
+    element's Hermite cubic; h = the section depth in the bending plane (`info["width"]`)."""
+    x = np.asarray(x, float)
+    i, j = np.asarray(model.elements).T
+    l = model.nodes[j, 1] - model.nodes[i, 1]
+    a, b, c, d = HERMITE_D2_CENTRE
+    curvature = (a * x[2 * i] / l + b * x[2 * i + 1] + c * x[2 * j] / l + d * x[2 * j + 1]) / l
+    return {"bending_stress": E * model.info["width"] / 2 * np.abs(curvature)}
+
+
+def solid_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
+    """The stress cell data of a plate (`plate_stress`) or beam (`beam_stress`), from the full
+    nodal DOF vector x = T q; {} for any other solid."""
+    if model.kind == "plate":
+        return plate_stress(model, E, nu, x)
+    if model.kind == "beam":
+        return beam_stress(model, E, x)
+    return {}
+
+
+def solid_frames(ds, model, elastic: tuple[float, float]
+                 ) -> Iterator[tuple[float, np.ndarray, np.ndarray, dict[str, np.ndarray]]]:
+    """(time, nodal displacement (nn, 3), nodal velocity (nn, 3), cell data) at each stored solid
+    output; the cell data: element energy density (ne,) and the stress (`solid_stress`) with
+    elastic = (E, nu)."""
     from .analysis.density import solid_energy_density
     from .animate import solid_states
 
@@ -128,7 +201,9 @@ def solid_frames(ds, model) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.
         Q, V = solid_states(ds, ts[a:a + SOLID_CHUNK])
         for t, q, v in zip(ts[a:a + SOLID_CHUNK], Q, V):
             u, w = model.full_displacement(q), model.full_displacement(v)
-            yield float(t), _vec3(u[:, 0], u[:, 1]), _vec3(w[:, 0], w[:, 1]), np.asarray(solid_energy_density(model, q, v), float)
+            cells = {"energy_density": np.asarray(solid_energy_density(model, q, v), float),
+                     **solid_stress(model, *elastic, model.T @ q)}
+            yield float(t), _vec3(u[:, 0], u[:, 1]), _vec3(w[:, 0], w[:, 1]), cells
 
 
 def solid_points(model) -> np.ndarray:
@@ -154,7 +229,7 @@ def _pvd(path: Path, entries: list[tuple[float, str]]) -> None:
     path.write_text("\n".join(lines))
 
 
-def write_vtk(ds, system, model, stage: Path, tick: Callable[[], None]) -> list[str]:
+def write_vtk(ds, system, model, elastic: tuple[float, float], stage: Path, tick: Callable[[], None]) -> list[str]:
     import meshio
 
     files = []
@@ -176,10 +251,10 @@ def write_vtk(ds, system, model, stage: Path, tick: Callable[[], None]) -> list[
         (stage / "solid").mkdir(exist_ok=True)
         pts, cells = solid_points(model), solid_cells(model)
         entries = []
-        for k, (t, u, v, w) in enumerate(solid_frames(ds, model)):
+        for k, (t, u, v, c) in enumerate(solid_frames(ds, model, elastic)):
             name = f"solid/solid_{k:06d}.vtu"
             mesh = meshio.Mesh(pts, cells, point_data={"displacement": u, "velocity": v},
-                               cell_data={"energy_density": [w]})
+                               cell_data={n: [a] for n, a in c.items()})
             meshio.write(stage / name, mesh, file_format="vtu")
             entries.append((t, name))
             files.append(name)
@@ -205,7 +280,7 @@ def _time_series_writer(path: Path):
     return Writer(path)
 
 
-def write_xdmf(ds, system, model, stage: Path, tick: Callable[[], None]) -> list[str]:
+def write_xdmf(ds, system, model, elastic: tuple[float, float], stage: Path, tick: Callable[[], None]) -> list[str]:
     times = ds["time"].values.astype(float)
     n = system.n
     p0 = granule_frame(ds, system, 0)["points"]
@@ -220,8 +295,8 @@ def write_xdmf(ds, system, model, stage: Path, tick: Callable[[], None]) -> list
     if has_solid(ds, model):
         with _time_series_writer(stage / "solid.xdmf") as w:
             w.write_points_cells(solid_points(model), solid_cells(model))
-            for t, u, v, e in solid_frames(ds, model):
-                w.write_data(t, point_data={"displacement": u, "velocity": v}, cell_data={"energy_density": [e]})
+            for t, u, v, c in solid_frames(ds, model, elastic):
+                w.write_data(t, point_data={"displacement": u, "velocity": v}, cell_data={n: [a] for n, a in c.items()})
                 tick()
         files += ["solid.h5", "solid.xdmf"]
     return files
@@ -301,15 +376,16 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
     formats = [f for f in FORMATS if f in set(formats)]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _, system, model = model_of(ds)
+    sc, system, model = model_of(ds)
+    elastic = elastic_constants(sc) if has_solid(ds, model) else (0.0, 0.0)
     stage = Path(tempfile.mkdtemp(prefix=f".granel-export.{os.getpid()}.", dir=out))
     written = []
     try:
         files = []
         if "vtk" in formats:
-            files += write_vtk(ds, system, model, stage, tick)
+            files += write_vtk(ds, system, model, elastic, stage, tick)
         if "xdmf" in formats:
-            files += write_xdmf(ds, system, model, stage, tick)
+            files += write_xdmf(ds, system, model, elastic, stage, tick)
         if "extxyz" in formats:
             files += write_extxyz(ds, system, stage, tick)
         if "csv" in formats:

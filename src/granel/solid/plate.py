@@ -118,15 +118,24 @@ def plate_mesh(x0, y0, width, length, left_layers, right_layers, nx=8, growth=1.
     return MeshQuad(p, np.array(t, dtype=np.int64).T)
 
 
-def plane_stress_forms(E, nu, rho, h):
-    from skfem import BilinearForm, Functional
-    from skfem.helpers import ddot, dot, sym_grad
-
-    lam = E * nu / (1 - nu**2)  # plane-stress Lame parameter: gives D of eq. (7)
+def plane_stress_law(E, nu):
+    """Hooke's law in plane stress, sigma = 2 mu eps + lam tr(eps) I with the plane-stress Lame
+    parameter lam = E nu / (1 - nu^2): the material matrix D of eq. (7), on strain tensors
+    (2, 2, ...) as scikit-fem's forms pass them."""
+    lam = E * nu / (1 - nu**2)
     mu = E / (2 * (1 + nu))
 
     def stress(eps):
         return 2 * mu * eps + lam * _tr_identity(eps)
+
+    return stress
+
+
+def plane_stress_forms(E, nu, rho, h):
+    from skfem import BilinearForm, Functional
+    from skfem.helpers import ddot, dot, sym_grad
+
+    stress = plane_stress_law(E, nu)
 
     @BilinearForm
     def stiffness(u, v, w):
