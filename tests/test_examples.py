@@ -25,3 +25,19 @@ def test_example_runs(tmp_path, script, expect):
     if script.startswith("shaker"):
         assert (tmp_path / "shaker-export" / "granules.pvd").exists()
         assert (tmp_path / "shaker-export" / "granules.extxyz").exists()
+
+
+def test_notebook_runs(tmp_path):
+    """examples/nonreciprocal_transmission.ipynb runs top to bottom under nbmake (its own pytest, in a
+    subprocess: `make test` does not pass --nbmake), shortened, on this interpreter's python3 kernel
+    (ipykernel's, found first through JUPYTER_PATH); it writes nothing, and no .pytest_cache either."""
+    notebook = EXAMPLES / "nonreciprocal_transmission.ipynb"
+    kernels = str(Path(sys.prefix) / "share" / "jupyter")
+    env = {**os.environ, "GRANEL_EXAMPLE_QUICK": "1",
+           "JUPYTER_PATH": os.pathsep.join(filter(None, [kernels, os.environ.get("JUPYTER_PATH")]))}
+    env.pop("MPLBACKEND", None)  # the kernel's own inline backend
+    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--nbmake",
+                          "--nbmake-timeout=600", str(notebook)],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, (res.stdout + res.stderr)[-4000:]
+    assert "1 passed" in res.stdout, res.stdout
