@@ -660,6 +660,76 @@ def spectrum(
 
 
 @app.command()
+def design(
+    design_file: Path = typer.Argument(..., help="design TOML (see docs/design.md)"),
+    out: Path = typer.Option(..., "-o", "--out", help="output folder: the study, trials.nc, best.toml or pareto/"),
+    trials: Optional[int] = typer.Option(None, "--trials", help="finished trials to reach (default: the design's `trials`)"),
+    workers: int = typer.Option(2, help="LocalCluster worker processes (ignored with --scheduler)"),
+    scheduler: Optional[str] = typer.Option(None, help="address of a running dask scheduler, e.g. tcp://host:8786"),
+    timeout: Optional[str] = typer.Option(None, "--timeout", help="stop launching trials after this wall time, e.g. "
+                                                                  "30min (a rerun continues the study)"),
+):
+    """Search a design's variables for its objectives with Optuna, each trial a case of the
+    sweep engine on dask.distributed; re-running continues the study. Exit code 3 if no trial
+    succeeded."""
+    if workers < 1:
+        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    if trials is not None and trials < 1:
+        _fail(f"--trials {trials}: give a whole number of trials >= 1")
+    budget = _wall_seconds(timeout, "--timeout")
+    from .design import DesignFileError, load_design, run_design
+    from .paths import OutputPathError, check_folder_path
+    from .sweep import SchedulerError
+
+    try:
+        spec, base_dir = load_design(design_file)
+    except DesignFileError as e:
+        _fail(str(e), 4 if "cannot read" in str(e) else 2)
+    try:
+        check_folder_path(out, "--out")
+    except OutputPathError as e:
+        _fail(str(e), e.code)
+    target = trials or spec.trials
+    failed = []
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+        task = bar.add_task(f"design {spec.name}", total=target)
+
+        def progress(number, status, done, total):
+            if status != "ok":
+                failed.append((number, status))
+            bar.update(task, completed=done)
+
+        try:
+            res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress)
+        except SchedulerError as e:
+            _fail(f"--scheduler {scheduler}: {e}", e.code)
+        except S.ScenarioError as e:
+            _fail(f"{design_file}: {e}")
+        except OSError as e:
+            _fail(f"--out {out}: cannot write the study ({e})", 4)
+    ds = res["trials"]
+    ok = int((ds["status"].values == "ok").sum())
+    t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],
+              title=f"design {spec.name}: {ds.sizes['trial']} trials, {ok} ok; best" +
+                    (" (Pareto front)" if len(spec.objectives) > 1 else ""))
+    for tr in res["best"]:
+        t.add_row(str(tr.number), *[f"{v:.5g}" for v in tr.values],
+                  *[f"{tr.params[v.field]:.5g}" if isinstance(tr.params[v.field], float) else str(tr.params[v.field])
+                    for v in spec.variables])
+    Console().print(t)
+    for number, status in failed[:10]:
+        console.print(f"[yellow]trial {number}[/]: {status}")
+    if len(failed) > 10:
+        console.print(f"... and {len(failed) - 10} more failed trials (their reasons are in {out / 'trials.nc'})")
+    if res["stopped"]:
+        console.print(f"--timeout {timeout}: stopped after {ds.sizes['trial']} trials; run the same command to continue")
+    console.print("wrote " + ", ".join(str(f) for f in res["files"][:4]) + (" ..." if len(res["files"]) > 4 else ""))
+    if ok == 0:
+        _fail(f"no trial of {ds.sizes['trial']} succeeded (reasons in {out / 'trials.nc'})", code=3)
+
+
+@app.command()
 def export(
     result: Path = typer.Argument(..., help="a result NetCDF file of `granel run`"),
     out: Path = typer.Option(..., "-o", "--out", help="output folder (created if missing)"),

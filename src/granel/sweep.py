@@ -49,8 +49,9 @@ from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
 # the version of the metric definitions: bumped when one changes (2: arrivals relative to the
-# driven granule, `analysis.reciprocity.pulse_arrival`), so that cached results are recomputed
-METRIC_RULES = 2
+# driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
+# `force_metrics`), so that cached results are recomputed
+METRIC_RULES = 3
 
 
 class SweepFileError(S.ScenarioError):
@@ -138,7 +139,11 @@ class AxisSpec(BaseModel):
         return np.array([list(p.values())[0] for p in self.points()])
 
 
-class SweepSpec(BaseModel):
+class CaseSpec(BaseModel):
+    """What one case runs and measures, shared by sweeps and designs: a base scenario and its
+    overrides, the mode (one run, both directions of a shock, or a narrowband spectrum point) and
+    the measured pair."""
+
     model_config = ConfigDict(extra="forbid")
     name: str = "sweep"
     description: str = ""
@@ -147,6 +152,20 @@ class SweepSpec(BaseModel):
     mode: Literal["reciprocity", "run", "spectrum"] = "reciprocity"
     pair: tuple[str, str] = ("LSGM:3", "SSGM:C")
     spectrum: SpectrumSpec | None = None
+
+    @model_validator(mode="after")
+    def _spectrum_table(self):
+        if (self.mode == "spectrum") != (self.spectrum is not None):
+            raise ValueError("mode = \"spectrum\" needs a [spectrum] table (drive, measure, ...), and only that mode takes one")
+        return self
+
+    @classmethod
+    def of(cls, spec_json: str) -> "CaseSpec":
+        """The case part of a sweep's or a design's JSON."""
+        return cls.model_validate({k: v for k, v in json.loads(spec_json).items() if k in cls.model_fields})
+
+
+class SweepSpec(CaseSpec):
     axes: list[AxisSpec] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -154,8 +173,6 @@ class SweepSpec(BaseModel):
         dims = [a.dim for a in self.axes]
         if len(set(dims)) != len(dims):
             raise ValueError(f"axis names must be unique, got {dims}")
-        if (self.mode == "spectrum") != (self.spectrum is not None):
-            raise ValueError("mode = \"spectrum\" needs a [spectrum] table (drive, measure, ...), and only that mode takes one")
         if self.mode == "spectrum":
             fields = {f for a in self.axes for f in ([a.field] if a.zip is None else list(a.zip))}
             if FREQUENCY_FIELD not in fields:
@@ -218,7 +235,7 @@ def _base_path(spec: SweepSpec, base_dir: Path) -> str:
     return str(p if p.is_absolute() else base_dir / p)
 
 
-def check_base(spec: SweepSpec, base_dir: Path) -> None:
+def check_base(spec: CaseSpec, base_dir: Path) -> None:
     """Fail early (ScenarioError) when the sweep's base scenario cannot be read or its overrides
     cannot be applied; whether each case's scenario is valid is each case's business."""
     base = _base_path(spec, base_dir)
@@ -253,7 +270,7 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
             raise
 
 
-def case_fingerprint(spec: SweepSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
+def case_fingerprint(spec: CaseSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
     """What a case's cached result depends on: the full scenario text of each of its runs (with
     every solver setting of its [simulation] table), the sweep's and the case's overrides, the
     mode and the measurement pair, the granel version and the metric rules."""
@@ -297,7 +314,7 @@ def _cached_run(path: Path, text: str):
     return ds
 
 
-def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[str, S.Scenario]]:
+def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict) -> list[tuple[str, S.Scenario]]:
     """The scenario(s) of one case: two (both directions) in reciprocity mode."""
     ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in case["overrides"].items()]
     base = _base_path(spec, base_dir)
@@ -315,10 +332,12 @@ def case_scenarios(spec: SweepSpec, base_dir: Path, case: dict) -> list[tuple[st
     return out
 
 
-def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
-    """Run one case (a worker task): writes its NetCDF file(s), returns its metrics or its error.
+def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = True) -> dict:
+    """Run one case (a worker task): writes its NetCDF file(s) (unless `keep_runs` is false: a
+    design's trials keep their metrics only), returns its metrics or its error, with `wall_s`.
     A stored result is returned instead only if it finished ok with this case's fingerprint
-    (`case_fingerprint`); a failed case is run again.
+    (`case_fingerprint`); a failed case is run again. `spec_json` is a sweep's or a design's
+    JSON (its `CaseSpec` part is used).
 
     Metrics (reciprocity mode, per direction): arrival_*_s at the measured granule follows
     `analysis.reciprocity.pulse_arrival` (5 % of the measured peak, NaN unless that peak reaches
@@ -328,7 +347,10 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
     from .results import write_netcdf
     from .run import run_scenario
 
-    spec = SweepSpec.model_validate_json(spec_json)
+    import time
+
+    start = time.perf_counter()
+    spec = CaseSpec.of(spec_json)
     out = Path(out_dir) / "cases"
     done = out / f"{case['tag']}.json"
     res: dict = {"tag": case["tag"], "index": list(case["index"]), "overrides": case["overrides"]}
@@ -341,10 +363,11 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
         runs = {}
         for key, sc in scenarios:
             path = out / f"{case['tag']}__{key}.nc"
-            ds = _cached_run(path, S.to_toml(sc))
+            ds = _cached_run(path, S.to_toml(sc)) if keep_runs else None
             if ds is None:
                 ds = run_scenario(sc)
-                write_netcdf(ds, path)
+                if keep_runs:
+                    write_netcdf(ds, path)
             runs[key] = ds
         if spec.mode == "spectrum":
             res["metrics"] = case_metrics(runs, spec.spectrum)
@@ -369,15 +392,55 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str) -> dict:
             measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
             r = run_metrics(ds, measured)
             res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
+        res["metrics"].update(force_metrics(scenarios, runs))
         res["status"] = "ok"
     except Exception as e:  # noqa: BLE001 - a failing case is recorded, the others go on
         res["status"] = f"error: {type(e).__name__}: {e}"
         res["traceback"] = traceback.format_exc(limit=3)
+    res["wall_s"] = time.perf_counter() - start
     out.mkdir(parents=True, exist_ok=True)
     tmp = done.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(res, default=float))
     tmp.replace(done)
     return res
+
+
+RUN_METRICS = ("arrival_measured_s", "arrival_solid_s", "peak_velocity_m_s", "energy_far_peak_frac",
+               "energy_far_final_frac", "solid_energy_peak_frac", "input_work_J", "spectral_centroid_hz")
+RECIPROCITY_METRICS = ("nonreciprocity_index", "arrival_fwd_s", "arrival_bwd_s", "peak_velocity_fwd", "peak_velocity_bwd",
+                       "energy_far_fwd", "energy_far_bwd", "solid_energy_fwd", "solid_energy_bwd", "centroid_fwd_hz",
+                       "centroid_bwd_hz", "arrival_solid_fwd_s", "arrival_solid_bwd_s")
+SIZE_METRICS = ("granular_mass_kg", "footprint_m2")
+PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
+
+
+def case_metric_names(mode: str) -> tuple[str, ...]:
+    """The metrics a case of `mode` ("run" or "reciprocity") reports (see `run_case`)."""
+    if mode == "run":
+        return RUN_METRICS + SIZE_METRICS + PEAK_METRICS
+    if mode == "reciprocity":
+        return RECIPROCITY_METRICS + SIZE_METRICS + tuple(n.replace("_N", f"{d}_N") for n in PEAK_METRICS
+                                                          for d in ("_fwd", "_bwd"))
+    raise ValueError(f"mode {mode!r}: its metrics depend on the spectrum's settings")
+
+
+def force_metrics(scenarios: list[tuple[str, S.Scenario]], runs: dict) -> dict[str, float]:
+    """Every case's size and peak forces (`analysis.contacts`): granular_mass_kg, footprint_m2
+    (of the first run's scenario) and, per run, peak_contact_force_N and peak_wall_force_N,
+    suffixed _fwd / _bwd in reciprocity mode (forward first) and by direction in spectrum mode."""
+    from .analysis.contacts import design_size, peak_forces
+    from .scenario.build import build_granular
+
+    out: dict[str, float] = {}
+    suffix = {0: "_fwd", 1: "_bwd"} if len(scenarios) == 2 else {0: ""}
+    for k, (key, sc) in enumerate(scenarios):
+        system = build_granular(sc, sc.base)[0]
+        if k == 0:
+            out.update(design_size(system))
+        peaks = peak_forces(runs[key], system)
+        for name in ("peak_contact_force_N", "peak_wall_force_N"):
+            out[name.replace("_N", f"{suffix.get(k, '_' + key)}_N")] = peaks[name]
+    return out
 
 
 def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:

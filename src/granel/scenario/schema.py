@@ -41,7 +41,7 @@ def _misfit(value, leaves: set) -> str | None:
     boolean read as a number, or a number or string read as a boolean."""
     items = value if isinstance(value, (list, tuple)) else [value]
     if bool in leaves:
-        if leaves <= {bool, type(None)} and any(not isinstance(v, bool) for v in items):
+        if leaves <= {bool, type(None)} and any(not isinstance(v, bool) and v is not None for v in items):
             return "a boolean (true or false) is expected"
         return None
     if any(isinstance(v, bool) for v in items) and leaves & {float, int}:
@@ -161,8 +161,10 @@ class MediumSpec(_Strict):
     face_y: float | None = Field(None, description="y of the face line of a medium growing up or down (default 0)")
     center_x: float | None = Field(None, description="x of column 0's centre for a medium growing up or down (default 0)")
     labels: Union[Literal["numeric", "alpha"], list[str]] = "numeric"
-    channel_walls: bool = True
-    outer_wall: bool = False
+    channel_walls: bool | None = Field(None, description="rigid walls along the growth at both ends of column 0 "
+                                                         "(default true, or as `walls` says)")
+    outer_wall: bool | None = Field(None, description="a rigid wall beyond the last column (default false, or as "
+                                                      "`walls` says)")
     walls: list[Literal["bottom", "top", "left", "right", "outer", "face"]] | None = Field(
         None, description="the rigid walls that close the medium, instead of channel_walls/outer_wall: the channel "
                           "walls (bottom/top for left/right growth, left/right for up/down), outer, face")
@@ -202,7 +204,7 @@ class MediumSpec(_Strict):
                 lo, hi = ("left", "right") if vertical else ("bottom", "top")
                 given = {"channel_walls": (lo, hi), "outer_wall": ("outer",)}
                 for key, names in given.items():
-                    if key in self.model_fields_set and getattr(self, key) != all(w in self.walls for w in names):
+                    if getattr(self, key) is not None and getattr(self, key) != all(w in self.walls for w in names):
                         raise ValueError(f"walls = {self.walls} contradicts {key} = "
                                          f"{str(getattr(self, key)).lower()}: give one of them")
                 for w in self.walls:
@@ -214,6 +216,11 @@ class MediumSpec(_Strict):
                                      "has a face wall")
                 if len(set(self.walls)) != len(self.walls):
                     raise ValueError(f"walls: {self.walls} names a wall twice")
+            else:  # the switches' defaults, visible in the resolved scenario (set without re-validation)
+                if self.channel_walls is None:
+                    self.__dict__["channel_walls"] = True
+                if self.outer_wall is None:
+                    self.__dict__["outer_wall"] = False
         else:
             for key in ("grow", "face_y", "center_x", "walls"):
                 if getattr(self, key) is not None:

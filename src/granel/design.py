@@ -1,0 +1,591 @@
+"""Design searches: `granel design DESIGN.toml -o DIR` looks for the scenario fields (radii,
+thicknesses, materials, friction, preload, drive amplitude, counts) that optimise one or more
+metrics of a case, with Optuna, each trial evaluated by the sweep engine (`sweep.run_case`) on
+dask.distributed workers.
+
+A design file (TOML):
+
+    name = "diode"
+    base = "paper"                          # built-in scenario name or a path, as a sweep's
+    overrides = ['solid.kind="beam"']
+    mode = "reciprocity"                    # both directions of a shock (pair) | "run": one run
+    pair = ["LSGM:3", "SSGM:C"]
+    trials = 200                            # the default of --trials
+    seed = 1                                # a study is reproducible with one worker
+    sampler = "auto"                        # auto (TPE for one objective, NSGA-II for several) |
+                                            # tpe | cmaes | nsga2 | random
+
+    [[variables]]                           # continuous: low, high, optional log = true
+    field = "media.1.radius"
+    low = 0.003
+    high = 0.008
+    [[variables]]                           # integer: integer = true
+    field = "media.1.columns.1"
+    low = 2
+    high = 6
+    integer = true
+    [[variables]]                           # categorical: choices
+    field = "solid.material"
+    choices = ["steel", "aluminium"]
+
+    [[objectives]]                          # a case metric (see `sweep.run_case`), a direction ...
+    metric = "nonreciprocity_index"
+    direction = "maximize"
+    [[objectives]]                          # ... or a target: minimise |metric / target - 1|
+    metric = "peak_wall_force_fwd_N"
+    target = 500.0
+
+    [[constraints]]                         # a metric with max and/or min
+    metric = "granular_mass_kg"
+    max = 0.5
+
+Trials: trial k applies the variables' values as overrides on top of the design's; its case is
+run by `sweep.run_case` (fingerprints, failure isolation and metrics are the sweep engine's); an
+invalid design (overlapping granules, an invalid field value, a numerical stop) is a failed trial
+with its reason, and the study goes on. The study lives in DIR/study.journal (Optuna's journal
+file): a rerun of the same command continues it; a trial that was in flight when a study was
+killed is marked failed ("interrupted") and run again with the same values (its finished case,
+if any, is reused from DIR/cases/). Each trial's sampler is seeded from the design's seed and the
+number of trials finished before it, so with one worker a resumed study asks for the same
+values as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from . import scenario as S
+from .sweep import CaseSpec, _base_path, _literal, case_metric_names, check_base
+
+# a trial's reason when the study stopped while it ran
+INTERRUPTED = "interrupted"
+
+
+class DesignFileError(S.ScenarioError):
+    """A design file that cannot be used; the message names the file and the field."""
+
+
+class VariableSpec(BaseModel):
+    """One scenario field searched: continuous (low, high, optional log), integer (integer = true)
+    or categorical (choices)."""
+
+    model_config = ConfigDict(extra="forbid")
+    field: str = Field(min_length=1)
+    low: float | None = None
+    high: float | None = None
+    log: bool = False
+    integer: bool = False
+    choices: list[Any] | None = None
+
+    @model_validator(mode="after")
+    def _kind(self):
+        if self.choices is not None:
+            if self.low is not None or self.high is not None or self.log or self.integer:
+                raise ValueError(f"{self.field}: a categorical variable takes choices only (no low, high, log, integer)")
+            if not self.choices:
+                raise ValueError(f"{self.field}: choices is empty")
+            if len({json.dumps(c, sort_keys=True) for c in self.choices}) != len(self.choices):
+                raise ValueError(f"{self.field}: choices repeat a value")
+            return self
+        if self.low is None or self.high is None:
+            raise ValueError(f"{self.field}: a variable needs low and high, or choices")
+        if not (math.isfinite(self.low) and math.isfinite(self.high)) or not self.low < self.high:
+            raise ValueError(f"{self.field}: needs finite low < high, got low = {self.low}, high = {self.high}")
+        if self.log and self.low <= 0:
+            raise ValueError(f"{self.field}: a log-scale variable needs low > 0, got {self.low}")
+        if self.integer and (self.low != int(self.low) or self.high != int(self.high)):
+            raise ValueError(f"{self.field}: an integer variable needs whole bounds, got {self.low}, {self.high}")
+        return self
+
+    @property
+    def kind(self) -> str:
+        return "categorical" if self.choices is not None else "int" if self.integer else "float"
+
+    def distribution(self):
+        """Optuna's distribution of this variable."""
+        from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
+
+        if self.choices is not None:
+            return CategoricalDistribution([_hashable(c) for c in self.choices])
+        if self.integer:
+            return IntDistribution(int(self.low), int(self.high), log=self.log)
+        return FloatDistribution(self.low, self.high, log=self.log)
+
+    def points(self) -> list[Any]:
+        """Values that bracket the range, to check the field before anything runs."""
+        return list(self.choices) if self.choices is not None else [self._cast(self.low), self._cast(self.high)]
+
+    def _cast(self, v):
+        return int(v) if self.integer else float(v)
+
+
+def _hashable(v):
+    """Optuna's categorical choices must be None, bool, int, float or str: lists travel as JSON."""
+    return json.dumps(v) if isinstance(v, (list, dict)) else v
+
+
+def _value(v):
+    """A categorical choice back from `_hashable`."""
+    if isinstance(v, str) and v[:1] in "[{":
+        try:
+            return json.loads(v)
+        except ValueError:
+            return v
+    return v
+
+
+class ObjectiveSpec(BaseModel):
+    """A case metric to maximise or minimise, or to bring to a target (minimise |m / target - 1|)."""
+
+    model_config = ConfigDict(extra="forbid")
+    metric: str = Field(min_length=1)
+    direction: Literal["minimize", "maximize"] | None = None
+    target: float | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.direction is None) == (self.target is None):
+            raise ValueError(f"objective {self.metric}: give either direction (minimize, maximize) or target")
+        if self.target is not None and (not math.isfinite(self.target) or self.target == 0):
+            raise ValueError(f"objective {self.metric}: target must be finite and non-zero, got {self.target}")
+        return self
+
+    @property
+    def name(self) -> str:
+        return self.metric if self.target is None else f"{self.metric}_misfit"
+
+    @property
+    def sense(self) -> str:
+        return self.direction or "minimize"
+
+    def value(self, metrics: dict) -> float:
+        m = _metric(metrics, self.metric)
+        return m if self.target is None else abs(m / self.target - 1.0)
+
+
+class ConstraintSpec(BaseModel):
+    """A case metric kept within max and/or min (Optuna's constraints: the value <= 0 is met)."""
+
+    model_config = ConfigDict(extra="forbid")
+    metric: str = Field(min_length=1)
+    max: float | None = None
+    min: float | None = None
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        if self.max is None and self.min is None:
+            raise ValueError(f"constraint {self.metric}: give max, min or both")
+        for b in (self.max, self.min):
+            if b is not None and not math.isfinite(b):
+                raise ValueError(f"constraint {self.metric}: bounds must be finite")
+        if self.max is not None and self.min is not None and not self.min < self.max:
+            raise ValueError(f"constraint {self.metric}: needs min < max")
+        return self
+
+    def violation(self, metrics: dict) -> float:
+        """How far the metric is outside its bounds, relative to them (<= 0: met)."""
+        m = _metric(metrics, self.metric)
+        out = -np.inf
+        if self.max is not None:
+            out = max(out, (m - self.max) / max(abs(self.max), 1e-300))
+        if self.min is not None:
+            out = max(out, (self.min - m) / max(abs(self.min), 1e-300))
+        return float(out)
+
+
+class MetricError(ValueError):
+    """An objective or constraint whose metric the case did not produce, or produced as NaN."""
+
+
+def _metric(metrics: dict, name: str) -> float:
+    if name not in metrics:
+        raise MetricError(f"no metric {name!r} in this case; it has {sorted(metrics)}")
+    v = metrics[name]
+    if not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise MetricError(f"metric {name!r} is {v!r}")
+    return float(v)
+
+
+class DesignSpec(CaseSpec):
+    name: str = "design"
+    trials: int = Field(50, ge=1, le=100_000)
+    seed: int = Field(0, ge=0)
+    sampler: Literal["auto", "tpe", "cmaes", "nsga2", "random"] = "auto"
+    variables: list[VariableSpec] = Field(min_length=1)
+    objectives: list[ObjectiveSpec] = Field(min_length=1)
+    constraints: list[ConstraintSpec] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _design(self):
+        if self.mode == "spectrum":
+            raise ValueError("mode: a design runs \"run\" or \"reciprocity\" cases (a spectrum objective is not "
+                             "available yet)")
+        known = case_metric_names(self.mode)
+        for what, items in (("objectives", self.objectives), ("constraints", self.constraints)):
+            for k, item in enumerate(items):
+                if item.metric not in known:
+                    raise ValueError(f"{what}.{k}.metric = {item.metric!r}: not a metric of a {self.mode!r} case; "
+                                     f"choose from {list(known)}")
+        fields = [v.field for v in self.variables]
+        if len(set(fields)) != len(fields):
+            raise ValueError(f"variables: a field appears twice in {fields}")
+        names = [o.name for o in self.objectives]
+        if len(set(names)) != len(names):
+            raise ValueError(f"objectives: {names} repeats one")
+        if self.sampler == "cmaes":
+            if len(self.objectives) > 1:
+                raise ValueError("sampler: cmaes optimises one objective; use nsga2 for several")
+            if self.constraints:
+                raise ValueError("sampler: cmaes takes no constraints; use tpe or nsga2")
+        return self
+
+    @property
+    def directions(self) -> list[str]:
+        return [o.sense for o in self.objectives]
+
+
+def load_design(path) -> tuple[DesignSpec, Path]:
+    """A design file -> (DesignSpec, its folder); DesignFileError names the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise DesignFileError(f"design {path}: no such file")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise DesignFileError(f"design {path}: cannot read it as text ({e})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise DesignFileError(f"design {path}: not valid TOML: {e}") from None
+    try:
+        spec = DesignSpec.model_validate(raw)
+    except ValidationError as e:
+        raise DesignFileError(S._format_validation_error(e).replace("invalid scenario", f"invalid design {path}")) from None
+    return spec, path.parent
+
+
+def check_design(spec: DesignSpec, base_dir: Path) -> None:
+    """Fail before anything runs (DesignFileError naming the variable) when a variable's field
+    cannot take its bounds or choices in the base scenario (a typo, a field that is not a
+    scenario's, a value its schema refuses everywhere)."""
+    check_base(spec, base_dir)
+    base = _base_path(spec, base_dir)
+    for k, var in enumerate(spec.variables):
+        errors = []
+        for v in var.points():
+            try:
+                S.load(base, [*spec.overrides, f"{var.field}={_literal(v)}"])
+            except S.ScenarioError as e:
+                errors.append((v, str(e)))
+        if len(errors) == len(var.points()):
+            v, msg = errors[0]
+            raise DesignFileError(f"variables.{k}.field = {var.field!r}: the base scenario refuses it "
+                                  f"({var.field} = {v!r}: {' '.join(msg.split())})")
+
+
+def trial_case(spec: DesignSpec, number: int, params: dict) -> dict:
+    """A trial as a sweep case: its overrides and a tag named by its values (so that a replayed
+    trial, or a repeated design, finds its finished case)."""
+    overrides = {v.field: _value(params[v.field]) for v in spec.variables}
+    digest = hashlib.sha1(json.dumps(overrides, sort_keys=True, default=repr).encode()).hexdigest()[:12]
+    return {"index": [number], "overrides": overrides, "tag": f"trial-{digest}"}
+
+
+def make_sampler(spec: DesignSpec, seed: int):
+    """Optuna's sampler for this design, seeded with `seed` (TPE for one objective and NSGA-II
+    for several under "auto"; constraints through Optuna's constraints_func)."""
+    import optuna
+
+    cons = (lambda t: t.user_attrs["constraints"]) if spec.constraints else None
+    kind = spec.sampler
+    if kind == "auto":
+        kind = "tpe" if len(spec.objectives) == 1 else "nsga2"
+    if kind == "tpe":
+        return optuna.samplers.TPESampler(seed=seed, multivariate=True, constraints_func=cons,
+                                          n_startup_trials=min(10, max(3, spec.trials // 5)))
+    if kind == "cmaes":
+        return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
+    if kind == "nsga2":
+        return optuna.samplers.NSGAIISampler(seed=seed, constraints_func=cons)
+    return optuna.samplers.RandomSampler(seed=seed)
+
+
+def trial_seed(seed: int, finished: int) -> int:
+    """The sampler seed of the trial asked after `finished` trials."""
+    return int(hashlib.sha256(f"{seed}:{finished}".encode()).hexdigest()[:8], 16)
+
+
+def ask_trial(study, spec: DesignSpec, dists: dict):
+    """The next trial: a queued one (a replay) or new values from a sampler seeded by the
+    design's seed and the number of trials finished so far."""
+    study.sampler = make_sampler(spec, trial_seed(spec.seed, finished_trials(study)))
+    return study.ask(fixed_distributions=dists)
+
+
+def open_study(spec: DesignSpec, out: Path):
+    """The design's Optuna study in out/study.journal, created or continued. A folder that holds
+    a study of another design is refused (DesignFileError)."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = JournalStorage(JournalFileBackend(str(out / "study.journal")))
+    study = optuna.create_study(study_name="granel-design", storage=storage, directions=spec.directions,
+                                load_if_exists=True)
+    mine = json.loads(spec.model_dump_json(exclude={"trials"}))
+    held = study.user_attrs.get("design")
+    if held is None:
+        study.set_user_attr("design", mine)
+    elif held != mine:
+        raise DesignFileError(f"-o {out}: it holds a study of another design (name {held.get('name')!r}); "
+                              "write this one to another folder")
+    return study
+
+
+def recover_interrupted(study) -> int:
+    """Mark the trials left running by a stopped study as failed ("interrupted") and queue their
+    values again; returns how many."""
+    from optuna.trial import TrialState
+
+    stale = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+    for t in stale:
+        study._storage.set_trial_user_attr(t._trial_id, "reason", INTERRUPTED)
+        study.tell(t.number, state=TrialState.FAIL, skip_if_finished=True)
+        study.enqueue_trial(t.params, user_attrs={"replay_of": t.number}, skip_if_exists=False)
+    return len(stale)
+
+
+def finished_trials(study) -> int:
+    """Trials that count toward the study's size: complete, or failed for their own reason."""
+    from optuna.trial import TrialState
+
+    n = 0
+    for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
+        n += t.user_attrs.get("reason") != INTERRUPTED
+    return n
+
+
+def score(spec: DesignSpec, result: dict) -> tuple[list[float] | None, list[float], str]:
+    """(objective values or None, constraint violations, reason) of a finished case."""
+    if result.get("status") != "ok":
+        return None, [], str(result.get("status", "error: no result"))
+    metrics = result.get("metrics", {})
+    try:
+        values = [o.value(metrics) for o in spec.objectives]
+        cons = [c.violation(metrics) for c in spec.constraints]
+    except MetricError as e:
+        return None, [], f"error: {e}"
+    return values, cons, "ok"
+
+
+def tell(study, spec: DesignSpec, trial, result: dict) -> str:
+    """Record a finished case as the trial's result; returns its status."""
+    from optuna.trial import TrialState
+
+    values, cons, reason = score(spec, result)
+    trial.set_user_attr("tag", result.get("tag", ""))
+    trial.set_user_attr("wall_s", float(result.get("wall_s", float("nan"))))
+    trial.set_user_attr("metrics", {k: float(v) for k, v in result.get("metrics", {}).items()
+                                    if isinstance(v, (int, float))})
+    trial.set_user_attr("reason", reason)
+    if values is None:
+        study.tell(trial, state=TrialState.FAIL)
+        return reason
+    trial.set_user_attr("constraints", cons)
+    study.tell(trial, values if len(values) > 1 else values[0])
+    return reason
+
+
+def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
+               scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
+               progress=None) -> dict:
+    """Run (or continue) the study until `trials` trials (default: the design's) have finished,
+    on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
+    trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
+    Writes the outputs (`write_outputs`) and returns {"study", "trials", "stopped"}."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    from .sweep import _connect, run_case
+
+    if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
+    target = int(trials or spec.trials)
+    check_design(spec, base_dir)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    study = open_study(spec, out)
+    recover_interrupted(study)
+    dists = {v.field: v.distribution() for v in spec.variables}
+    spec_json = spec.model_dump_json()
+    base = str(base_dir.resolve())
+    start = time.monotonic()
+    cluster = None
+    if scheduler:
+        client = _connect(scheduler, timeout)
+    else:
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    slots = max(1, len(client.scheduler_info()["workers"]))
+    in_flight: dict = {}
+    stopped = False
+
+    def launch():
+        trial = ask_trial(study, spec, dists)
+        case = trial_case(spec, trial.number, trial.params)
+        fut = client.submit(run_case, spec_json, base, case, str(out.resolve()), False, pure=False,
+                            key=f"granel-design-{trial.number}-{case['tag']}-{time.time_ns()}")
+        in_flight[fut] = (trial, case)
+        return fut
+
+    try:
+        done = finished_trials(study)
+        pending = as_completed([launch() for _ in range(min(slots, max(0, target - done)))])
+        for fut in pending:
+            trial, case = in_flight.pop(fut)
+            try:
+                r = fut.result()
+            except OSError:
+                raise
+            except Exception as e:  # noqa: BLE001 - e.g. KilledWorker: the trial failed, the study goes on
+                r = {"tag": case["tag"], "status": f"error: task failed: {type(e).__name__}: {e}"}
+            status = tell(study, spec, trial, r)
+            done += 1
+            if progress is not None:
+                progress(trial.number, status, done, target)
+            if max_wall is not None and time.monotonic() - start > max_wall:
+                stopped = True
+                break
+            if done + len(in_flight) < target:
+                pending.add(launch())
+    finally:
+        for fut in in_flight:
+            fut.cancel()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    written = write_outputs(spec, base_dir, study, out)
+    return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],
+            "best": written["best"]}
+
+
+# ---------------------------------------------------------------- outputs
+
+
+def trials_dataset(spec: DesignSpec, study):
+    """Every trial: its variables, objectives, constraint violations, feasibility, status,
+    reason, wall time and metrics, along `trial` (Optuna's trial number)."""
+    import xarray as xr
+    from optuna.trial import TrialState
+
+    ts = [t for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING]
+    n = len(ts)
+    data: dict[str, Any] = {}
+    for v in spec.variables:
+        vals = [_value(t.params.get(v.field)) for t in ts]
+        if v.kind == "categorical":
+            data[f"var_{v.field}"] = ("trial", np.array([json.dumps(x) if not isinstance(x, str) else x for x in vals], dtype=str))
+        else:
+            data[f"var_{v.field}"] = ("trial", np.array([np.nan if x is None else float(x) for x in vals]))
+    for k, o in enumerate(spec.objectives):
+        data[f"objective_{o.name}"] = ("trial", np.array([t.values[k] if t.state == TrialState.COMPLETE else np.nan
+                                                         for t in ts], float))
+    for k, c in enumerate(spec.constraints):
+        data[f"constraint_{c.metric}"] = ("trial", np.array([t.user_attrs.get("constraints", [np.nan] * len(spec.constraints))[k]
+                                                            for t in ts], float))
+    feasible = [t.state == TrialState.COMPLETE and all(c <= 0 for c in t.user_attrs.get("constraints", [])) for t in ts]
+    data["feasible"] = ("trial", np.array(feasible, bool))
+    data["status"] = ("trial", np.array([_status(t) for t in ts], dtype=str))
+    data["reason"] = ("trial", np.array([str(t.user_attrs.get("reason", "")) for t in ts], dtype=str))
+    data["wall_s"] = ("trial", np.array([t.user_attrs.get("wall_s", np.nan) for t in ts], float))
+    names = sorted({k for t in ts for k in t.user_attrs.get("metrics", {})})
+    for m in names:
+        data[f"metric_{m}"] = ("trial", np.array([t.user_attrs.get("metrics", {}).get(m, np.nan) for t in ts], float))
+    ds = xr.Dataset(data, coords={"trial": np.array([t.number for t in ts], int)})
+    ds.attrs.update({"design": spec.model_dump_json(), "name": spec.name, "directions": json.dumps(spec.directions),
+                     "trials": n})
+    return ds
+
+
+def _status(t) -> str:
+    from optuna.trial import TrialState
+
+    if t.state == TrialState.COMPLETE:
+        return "ok"
+    if t.state == TrialState.RUNNING:
+        return "running"
+    return t.user_attrs.get("reason", "error") if t.user_attrs.get("reason") == INTERRUPTED else "failed"
+
+
+def best_trials(spec: DesignSpec, study) -> list:
+    """The best feasible trial (one objective) or the feasible Pareto front (several), best
+    first / in order of the first objective."""
+    from optuna.trial import TrialState
+
+    ok = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+          if all(c <= 0 for c in t.user_attrs.get("constraints", []))]
+    if not ok:
+        return []
+    signs = np.array([1.0 if d == "minimize" else -1.0 for d in spec.directions])
+    if len(spec.objectives) == 1:
+        return [min(ok, key=lambda t: signs[0] * t.values[0])]
+    v = np.array([t.values for t in ok]) * signs
+    front = [t for k, t in enumerate(ok) if not any(np.all(v[j] <= v[k]) and np.any(v[j] < v[k]) for j in range(len(ok)))]
+    return sorted(front, key=lambda t: signs[0] * t.values[0])
+
+
+def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenario:
+    """The runnable scenario of a trial: the base, the design's overrides and the trial's values."""
+    case = trial_case(spec, 0, params)
+    return S.load(_base_path(spec, base_dir), [*spec.overrides, *(f"{k}={_literal(v)}" for k, v in case["overrides"].items())])
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+HEADER = "# written by granel design"
+
+
+def write_outputs(spec: DesignSpec, base_dir: Path, study, out: Path) -> dict:
+    """trials.nc, and best.toml (one objective) or pareto/NN.toml (several): each a scenario that
+    `granel run` takes as it is, headed by its trial and objective values. Stale pareto/NN.toml
+    files of this study (headed as granel design writes them) are removed; no other file is."""
+    from .results import write_netcdf
+
+    ds = trials_dataset(spec, study)
+    write_netcdf(ds, out / "trials.nc")
+    files = [out / "trials.nc"]
+    best = best_trials(spec, study)
+
+    def scenario_text(t) -> str:
+        values = ", ".join(f"{o.name} = {v:.6g}" for o, v in zip(spec.objectives, t.values))
+        sc = design_scenario(spec, base_dir, t.params)
+        return f"{HEADER} {spec.name!r}: trial {t.number}; {values}\n" + S.to_toml(sc)
+
+    if len(spec.objectives) == 1:
+        if best:
+            _write_text(out / "best.toml", scenario_text(best[0]))
+            files.append(out / "best.toml")
+    else:
+        folder = out / "pareto"
+        folder.mkdir(exist_ok=True)
+        keep = set()
+        for k, t in enumerate(best):
+            path = folder / f"{k:02d}.toml"
+            _write_text(path, scenario_text(t))
+            keep.add(path.name)
+            files.append(path)
+        for old in folder.glob("[0-9][0-9].toml"):
+            if old.name not in keep and old.read_text().startswith(HEADER):
+                old.unlink()
+    return {"trials": ds, "files": files, "best": best}
