@@ -285,3 +285,26 @@ def test_the_plate_cache_gives_the_assembled_plate(tmp_path, monkeypatch):
     path.write_bytes(b"not a cache")
     again = build_plate(*args)
     assert not isinstance(again, plate.CachedPlate) and abs(again.K - fresh.K).max() == 0
+
+
+def test_the_cache_is_pruned_oldest_first_and_only_granel_files(tmp_path, monkeypatch):
+    """GRANEL_CACHE_LIMIT bounds the cache: the least recently used of granel's own files go
+    first, a file named in `keep` never, and a foreign file in the folder is never touched."""
+    import os
+
+    from granel.solid.modal import cache_limit, prune_cache
+
+    monkeypatch.setenv("GRANEL_CACHE", str(tmp_path))
+    names = ["modes-plate-1-a.shapes.npy", "modes-plate-1-a.omega.npy", "plate-b.npz", "modes-below-beam-2-c.shapes.npy",
+             "mine.npy"]
+    for k, name in enumerate(names):
+        (tmp_path / name).write_bytes(b"x" * 1000)
+        os.utime(tmp_path / name, (1e9 + k, 1e9 + k))
+    removed = prune_cache(keep=(tmp_path / "modes-plate-1-a.shapes.npy",), limit=2500)
+    assert [p.name for p in removed] == ["modes-plate-1-a.omega.npy", "plate-b.npz"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["modes-plate-1-a.shapes.npy",
+                                                                 "modes-below-beam-2-c.shapes.npy", "mine.npy"])
+    assert prune_cache(limit=0) and sorted(p.name for p in tmp_path.iterdir()) == ["mine.npy"]
+    for text, value in (("3G", 3 * 1024**3), ("500MB", 500 * 1024**2), ("12345", 12345), ("junk", 2 * 1024**3)):
+        monkeypatch.setenv("GRANEL_CACHE_LIMIT", text)
+        assert cache_limit() == value

@@ -220,6 +220,8 @@ class DesignSpec(CaseSpec):
     trials: int = Field(50, ge=1, le=100_000)
     seed: int = Field(0, ge=0)
     sampler: Literal["auto", "tpe", "cmaes", "nsga2", "random"] = "auto"
+    population: int | None = Field(None, ge=2, le=10_000, description="NSGA-II's generation size (default: "
+                                                                     "trials / 6, between 8 and 50)")
     variables: list[VariableSpec] = Field(min_length=1)
     objectives: list[ObjectiveSpec] = Field(min_length=1)
     constraints: list[ConstraintSpec] = Field(default_factory=list)
@@ -313,8 +315,14 @@ def make_sampler(spec: DesignSpec, seed: int):
     if kind == "cmaes":
         return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
     if kind == "nsga2":
-        return optuna.samplers.NSGAIISampler(seed=seed, constraints_func=cons)
+        return optuna.samplers.NSGAIISampler(seed=seed, constraints_func=cons, population_size=nsga2_population(spec))
     return optuna.samplers.RandomSampler(seed=seed)
+
+
+def nsga2_population(spec: DesignSpec) -> int:
+    """NSGA-II's generation size: `population`, or about a sixth of the trials (between 8 and
+    50, Optuna's default), so that a study runs several generations."""
+    return spec.population or int(min(50, max(8, spec.trials // 6)))
 
 
 def trial_seed(seed: int, finished: int) -> int:
@@ -324,8 +332,13 @@ def trial_seed(seed: int, finished: int) -> int:
 
 def ask_trial(study, spec: DesignSpec, dists: dict):
     """The next trial: a queued one (a replay) or new values from a sampler seeded by the
-    design's seed and the number of trials finished so far."""
-    study.sampler = make_sampler(spec, trial_seed(spec.seed, finished_trials(study)))
+    design's seed and the number of trials finished or running (so that trials asked side by
+    side for several workers differ, and one worker's sequence does not depend on the trial
+    numbers an interruption used up)."""
+    from optuna.trial import TrialState
+
+    running = len(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
+    study.sampler = make_sampler(spec, trial_seed(spec.seed, finished_trials(study) + running))
     return study.ask(fixed_distributions=dists)
 
 
@@ -392,7 +405,8 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
 
     values, cons, reason = score(spec, result)
     trial.set_user_attr("tag", result.get("tag", ""))
-    trial.set_user_attr("wall_s", float(result.get("wall_s", float("nan"))))
+    for key in ("wall_s", "solver_s", "turnaround_s"):
+        trial.set_user_attr(key, float(result.get(key, float("nan"))))
     trial.set_user_attr("metrics", {k: float(v) for k, v in result.get("metrics", {}).items()
                                     if isinstance(v, (int, float))})
     trial.set_user_attr("reason", reason)
@@ -406,11 +420,13 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
 
 def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
                scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
-               progress=None) -> dict:
+               progress=None, report: bool = True) -> dict:
     """Run (or continue) the study until `trials` trials (default: the design's) have finished,
     on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
     trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
-    Writes the outputs (`write_outputs`) and returns {"study", "trials", "stopped"}."""
+    Writes the outputs (`write_outputs`) and, with `report`, the figures, the re-evaluation of
+    the best designs and report.md (`design_report`); returns {"study", "trials", "stopped",
+    "files", "best"}."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .sweep import _connect, run_case
@@ -442,20 +458,21 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         case = trial_case(spec, trial.number, trial.params)
         fut = client.submit(run_case, spec_json, base, case, str(out.resolve()), False, pure=False,
                             key=f"granel-design-{trial.number}-{case['tag']}-{time.time_ns()}")
-        in_flight[fut] = (trial, case)
+        in_flight[fut] = (trial, case, time.monotonic())
         return fut
 
+    done = first = finished_trials(study)
     try:
-        done = finished_trials(study)
         pending = as_completed([launch() for _ in range(min(slots, max(0, target - done)))])
         for fut in pending:
-            trial, case = in_flight.pop(fut)
+            trial, case, launched = in_flight.pop(fut)
             try:
-                r = fut.result()
+                r = dict(fut.result())
             except OSError:
                 raise
             except Exception as e:  # noqa: BLE001 - e.g. KilledWorker: the trial failed, the study goes on
                 r = {"tag": case["tag"], "status": f"error: task failed: {type(e).__name__}: {e}"}
+            r["turnaround_s"] = time.monotonic() - launched  # launch to result, as the study sees it
             status = tell(study, spec, trial, r)
             done += 1
             if progress is not None:
@@ -471,7 +488,14 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         client.close()
         if cluster is not None:
             cluster.close()
+    sessions = list(study.user_attrs.get("sessions", []))
+    sessions.append({"wall_s": time.monotonic() - start, "trials": done - first, "workers": slots})
+    study.set_user_attr("sessions", sessions)
     written = write_outputs(spec, base_dir, study, out)
+    if report:
+        from .design_report import write_study_report
+
+        written["files"] += write_study_report(spec, base_dir, study, out)
     return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],
             "best": written["best"]}
 
@@ -504,7 +528,9 @@ def trials_dataset(spec: DesignSpec, study):
     data["feasible"] = ("trial", np.array(feasible, bool))
     data["status"] = ("trial", np.array([_status(t) for t in ts], dtype=str))
     data["reason"] = ("trial", np.array([str(t.user_attrs.get("reason", "")) for t in ts], dtype=str))
-    data["wall_s"] = ("trial", np.array([t.user_attrs.get("wall_s", np.nan) for t in ts], float))
+    for key, what in (("wall_s", "the case's time in its worker"), ("solver_s", "its runs' time in the solver"),
+                      ("turnaround_s", "launch to result, as the study saw it")):
+        data[key] = ("trial", np.array([t.user_attrs.get(key, np.nan) for t in ts], float), {"units": "s", "long_name": what})
     names = sorted({k for t in ts for k in t.user_attrs.get("metrics", {})})
     for m in names:
         data[f"metric_{m}"] = ("trial", np.array([t.user_attrs.get("metrics", {}).get(m, np.nan) for t in ts], float))

@@ -334,7 +334,8 @@ def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict) -> list[tuple[str
 
 def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = True) -> dict:
     """Run one case (a worker task): writes its NetCDF file(s) (unless `keep_runs` is false: a
-    design's trials keep their metrics only), returns its metrics or its error, with `wall_s`.
+    design's trials keep their metrics only), returns its metrics or its error, with `wall_s`
+    (the case's time in the worker) and `solver_s` (its runs' time in the solver).
     A stored result is returned instead only if it finished ok with this case's fingerprint
     (`case_fingerprint`); a failed case is run again. `spec_json` is a sweep's or a design's
     JSON (its `CaseSpec` part is used).
@@ -393,6 +394,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
             r = run_metrics(ds, measured)
             res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
         res["metrics"].update(force_metrics(scenarios, runs))
+        res["solver_s"] = sum(float(ds.attrs.get("solver_wall_time_s", np.nan)) for ds in runs.values())
         res["status"] = "ok"
     except Exception as e:  # noqa: BLE001 - a failing case is recorded, the others go on
         res["status"] = f"error: {type(e).__name__}: {e}"

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pathlib import Path
+
 import numpy as np
 import scipy.linalg as sl
 from scipy.sparse.linalg import eigsh
@@ -123,6 +125,69 @@ def cache_dir():
     return Path(os.environ.get("GRANEL_CACHE", Path.home() / ".cache" / "granel"))
 
 
+# granel's own cache files (modes, modes below a cut-off, assembled plates): the only files pruning removes
+CACHE_PATTERNS = ("modes-*.omega.npy", "modes-*.shapes.npy", "plate-*.npz")
+CACHE_LIMIT = 2 * 1024**3  # bytes, unless GRANEL_CACHE_LIMIT says otherwise
+
+
+def cache_limit() -> int:
+    """The cache's size bound in bytes: GRANEL_CACHE_LIMIT (bytes, or with K, M, G suffix), or 2 GiB."""
+    import os
+
+    text = os.environ.get("GRANEL_CACHE_LIMIT", "").strip().upper().removesuffix("B")
+    if not text:
+        return CACHE_LIMIT
+    scale = {"K": 1024, "M": 1024**2, "G": 1024**3}.get(text[-1], 1)
+    try:
+        value = float(text[:-1] if scale > 1 else text) * scale
+    except ValueError:
+        return CACHE_LIMIT
+    return int(value) if value > 0 else CACHE_LIMIT
+
+
+def prune_cache(keep=(), limit: int | None = None) -> list:
+    """Remove the least recently used of granel's cache files (CACHE_PATTERNS; a cache hit
+    touches its files) until the cache holds at most `limit` bytes (`cache_limit()`), never the
+    files in `keep` (the ones just written or read). A design study meets a new plate at every
+    trial (about 100 MB of modes each): without a bound the cache would grow without end.
+    Returns the removed paths; files it cannot remove are left."""
+    limit = cache_limit() if limit is None else limit
+    folder = cache_dir()
+    files = []
+    for pattern in CACHE_PATTERNS:
+        for f in folder.glob(pattern):
+            try:
+                st = f.stat()
+            except OSError:
+                continue
+            files.append((st.st_mtime, st.st_size, f))
+    total = sum(size for _, size, _ in files)
+    keep = {Path(k).resolve() for k in keep}
+    removed = []
+    for _, size, f in sorted(files):
+        if total <= limit:
+            break
+        if f.resolve() in keep:
+            continue
+        try:
+            f.unlink()
+        except OSError:
+            continue
+        total -= size
+        removed.append(f)
+    return removed
+
+
+def _touch(*paths) -> None:
+    import os
+
+    for p in paths:
+        try:
+            os.utime(p)
+        except OSError:
+            pass
+
+
 def all_modes(model: SolidModel) -> Modes:
     """All modes of the solid, cached on disk by a hash of M and K (the plate's 3584 take about
     9 s to compute). The shapes come back memory-mapped: a run reads only the rows at its
@@ -168,6 +233,7 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool) -> Mo
             omega = np.load(omega_path)
             shapes = np.load(shapes_path, mmap_mode="r" if mmap else None)
             if shapes.shape == (model.ndof, len(omega)):
+                _touch(omega_path, shapes_path)  # recently used: pruned last
                 return Modes(omega, shapes)
         except (OSError, ValueError):
             pass  # a damaged cache file is recomputed and replaced
@@ -176,6 +242,7 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool) -> Mo
         stem.parent.mkdir(parents=True, exist_ok=True)
         _save_atomic(shapes_path, modes.shapes)
         _save_atomic(omega_path, modes.omega)
+        prune_cache(keep=(omega_path, shapes_path))
     except OSError:
         pass
     return modes

@@ -223,6 +223,9 @@ def _save_plate(path, model: SolidModel) -> None:
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
         os.replace(tmp, path)
+        from .modal import prune_cache
+
+        prune_cache(keep=(path,))
     except OSError:
         pass
     finally:
@@ -246,6 +249,9 @@ def _load_plate(path, args) -> SolidModel | None:
             nodes, elements, volume, node_dofs = z["nodes"], z["elements"], z["volume"], z["node_dofs"]
     except (OSError, ValueError, KeyError):
         return None
+    from .modal import _touch
+
+    _touch(path)  # recently used: pruned last
     model = CachedPlate("plate", mats["M"], mats["K"], contacts, info, mats["T"], nodes, elements, None, volume, None)
     model.node_dofs = node_dofs
     model.full_displacement = model.full
