@@ -249,3 +249,80 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     gap = np.hypot(found[:, None, 0] - curve[None, :, 0], found[:, None, 1] - curve[None, :, 1])
     assert gap.min(axis=1).max() < 0.05  # every point found lies near the true front (measured 0.024)
     assert gap.min(axis=0).max() < 0.25  # and covers it end to end (measured 0.16, near a corner)
+
+
+RESONATOR = """name = "resonator"
+description = "one steel granule (R = 5 mm) pressed on a rigid wall by a static force, driven harmonically"
+[simulation]
+duration = "4ms"
+equilibrate = true
+[contact]
+mu = 0.0
+alpha_n = 0.02
+[solid]
+kind = "none"
+[[media]]
+name = "G"
+side = "none"
+grow = "right"
+radius = 0.005
+columns = [1]
+walls = ["face"]
+[[excitations]]
+granule = "G:1"
+kind = "harmonic"
+amplitude = 0.01
+frequency = 10000.0
+ramp_cycles = 5
+direction = [-1.0, 0.0]
+[[excitations]]
+granule = "G:1"
+kind = "constant"
+value = 3.0
+direction = [-1.0, 0.0]
+"""
+
+
+@pytest.mark.slow
+def test_a_spectrum_objective_tunes_a_contact_resonance(tmp_path):
+    """Spectrum mode: a granule pressed on a wall by F0 and shaken by 0.01 N at 10 kHz moves most
+    (per newton) when its linearised Hertz contact resonates there: k = 3/2 A^(2/3) F0^(1/3) =
+    m w^2, so F0* = (m w^2 / (3/2 A^(2/3)))^3 = 2.948 N (A = 4/3 E/(1 - nu^2) sqrt(R)); Tsuji
+    damping (alpha_n = 0.02, a ratio of about 0.8 %) moves the velocity resonance by -6 zeta^2,
+    -0.04 % in F0 (with alpha_n = 0.05, direct runs put the peak at 2.939 N, -0.3 %, as predicted).
+    Maximising the band's mobility over F0 in [1.5, 6] N (log) with 40 TPE trials, the mobility
+    measured by granel's lock-in on the steady window, lands within 1 % (measured +0.72 %: the
+    peak is flat, 1 % in F0 is 0.2 dB); the trial's metrics are the declared band metrics."""
+    from granel.design import band_metric_names, load_design, run_design
+
+    (tmp_path / "reso.toml").write_text(RESONATOR)
+    (tmp_path / "d.toml").write_text("""name = "resonance"
+base = "reso.toml"
+mode = "spectrum"
+frequencies = [10000.0]
+trials = 40
+seed = 1
+[spectrum]
+drive = "G:1"
+measure = "G:1"
+both_directions = false
+cycles = 120
+[[variables]]
+field = "excitations.1.value"
+low = 1.5
+high = 6.0
+log = true
+[[objectives]]
+metric = "mobility_fwd_db"
+direction = "maximize"
+""")
+    spec, base = load_design(tmp_path / "d.toml")
+    res = run_design(spec, base, tmp_path / "out", workers=1, report=False)
+    m, w = 4 / 3 * math.pi * 0.005**3 * 7850, 2 * math.pi * 1e4
+    A = 4 / 3 * 200e9 / (1 - 0.3**2) * math.sqrt(0.005)
+    f0 = (m * w**2 / (1.5 * A ** (2 / 3))) ** 3
+    assert f0 == pytest.approx(2.9484, abs=1e-4)
+    assert res["best"][0].params["excitations.1.value"] == pytest.approx(f0, rel=0.01)
+    metrics = res["best"][0].user_attrs["metrics"]
+    assert set(metrics) == set(band_metric_names(spec))
+    assert metrics["steady_share_fwd"] == 1.0 and metrics["balance_fwd"] < 1e-5

@@ -64,7 +64,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from . import scenario as S
-from .sweep import CaseSpec, _base_path, _literal, case_metric_names, check_base
+from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, case_metric_names, check_base
 
 # a trial's reason when the study stopped while it ran
 INTERRUPTED = "interrupted"
@@ -225,13 +225,22 @@ class DesignSpec(CaseSpec):
     variables: list[VariableSpec] = Field(min_length=1)
     objectives: list[ObjectiveSpec] = Field(min_length=1)
     constraints: list[ConstraintSpec] = Field(default_factory=list)
+    frequencies: list[float] | None = Field(None, description="spectrum mode: the band's drive frequencies [Hz], "
+                                                              "each a narrowband run (both directions if the "
+                                                              "[spectrum] table says so)")
 
     @model_validator(mode="after")
     def _design(self):
-        if self.mode == "spectrum":
-            raise ValueError("mode: a design runs \"run\" or \"reciprocity\" cases (a spectrum objective is not "
-                             "available yet)")
-        known = case_metric_names(self.mode)
+        if (self.mode == "spectrum") != (self.frequencies is not None):
+            raise ValueError("frequencies: a design in spectrum mode needs its band's frequencies [Hz], and only "
+                             "that mode takes them")
+        if self.frequencies is not None:
+            if not 1 <= len(self.frequencies) <= MAX_BAND:
+                raise ValueError(f"frequencies: give 1 to {MAX_BAND} drive frequencies, got {len(self.frequencies)}")
+            for k, f in enumerate(self.frequencies):
+                if not (math.isfinite(f) and f > 0):
+                    raise ValueError(f"frequencies.{k} = {f!r}: a drive frequency must be positive [Hz]")
+        known = design_metric_names(self)
         for what, items in (("objectives", self.objectives), ("constraints", self.constraints)):
             for k, item in enumerate(items):
                 if item.metric not in known:
@@ -253,6 +262,86 @@ class DesignSpec(CaseSpec):
     @property
     def directions(self) -> list[str]:
         return [o.sense for o in self.objectives]
+
+
+# the largest band of a spectrum-mode design (each frequency is a run, or two)
+MAX_BAND = 200
+
+
+def band_metric_names(spec) -> tuple[str, ...]:
+    """The metrics of a spectrum-mode trial (`band_metrics`)."""
+    dirs = [d for d, _, _ in spec.spectrum.runs()]
+    out = [name for d in dirs for name in (f"mobility_{d}_db", f"transmissibility_{d}_db", f"mobility_{d}_db_max",
+                                           f"transmissibility_{d}_db_max", f"steady_share_{d}", f"balance_{d}")]
+    if spec.spectrum.both_directions:
+        out += ["nonreciprocity_db", "nonreciprocity_db_min", "nonreciprocity_db_max"]
+    peaks = [f"{n.replace('_N', '')}{'_' + d if len(dirs) > 1 else ''}_N" for n in PEAK_METRICS for d in dirs]
+    return tuple(out) + SIZE_METRICS + tuple(peaks)
+
+
+def design_metric_names(spec) -> tuple[str, ...]:
+    """What an objective or a constraint of this design may name."""
+    return band_metric_names(spec) if spec.mode == "spectrum" else case_metric_names(spec.mode)
+
+
+def band_metrics(spec, per_frequency: list[dict]) -> dict[str, float]:
+    """A spectrum trial's metrics from its frequencies' case metrics (`spectrum.case_metrics`):
+    per direction the band's mean and largest mobility and transmissibility in dB
+    (20 log10, mobility re 1 m/(N s)), the share of steady runs and the largest balance error;
+    the mean, smallest and largest nonreciprocity [dB]; the design's size and the band's largest
+    peak forces."""
+    out: dict[str, float] = {}
+
+    def db(values):
+        v = np.asarray(values, float)
+        return 20.0 * np.log10(np.where(v > 0, v, np.nan))
+
+    for d, _, _ in spec.spectrum.runs():
+        for q in ("mobility", "transmissibility"):
+            x = db([m[f"{q}_{d}"] for m in per_frequency])
+            out[f"{q}_{d}_db"] = float(np.mean(x))
+            out[f"{q}_{d}_db_max"] = float(np.max(x))
+        out[f"steady_share_{d}"] = float(np.mean([m[f"steady_{d}"] for m in per_frequency]))
+        out[f"balance_{d}"] = float(np.max([m[f"balance_{d}"] for m in per_frequency]))
+    if spec.spectrum.both_directions:
+        nr = np.array([m["nonreciprocity_db"] for m in per_frequency], float)
+        out.update(nonreciprocity_db=float(np.mean(nr)), nonreciprocity_db_min=float(np.min(nr)),
+                   nonreciprocity_db_max=float(np.max(nr)))
+    for key in per_frequency[0]:
+        if key in SIZE_METRICS:
+            out[key] = float(per_frequency[0][key])
+        elif key.startswith("peak_"):
+            out[key] = float(np.max([m[key] for m in per_frequency]))
+    return out
+
+
+def evaluate_trial(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = False) -> dict:
+    """A trial on a worker: its case by the sweep engine's `run_case` (metrics only, unless
+    `keep_runs`), or in spectrum mode one case per frequency of the band and the band's metrics
+    (`band_metrics`; any frequency failing fails the trial, with its reason)."""
+    from .spectrum import FREQUENCY_FIELD
+    from .sweep import run_case
+
+    spec = DesignSpec.model_validate_json(spec_json)
+    if spec.mode != "spectrum":
+        return run_case(spec_json, base_dir, case, out_dir, keep_runs)
+    start = time.perf_counter()
+    res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0}
+    per = []
+    for k, f in enumerate(spec.frequencies):
+        sub = {"index": [*case["index"], k], "overrides": {**case["overrides"], FREQUENCY_FIELD: float(f)},
+               "tag": f"{case['tag']}-f{k:03d}"}
+        r = run_case(spec_json, base_dir, sub, out_dir, keep_runs)
+        res["solver_s"] += float(r.get("solver_s", 0.0))
+        if r.get("status") != "ok":
+            res["status"] = f"{r.get('status')} (at {f:g} Hz)"
+            break
+        per.append(r["metrics"])
+    else:
+        res["metrics"] = band_metrics(spec, per)
+        res["status"] = "ok"
+    res["wall_s"] = time.perf_counter() - start
+    return res
 
 
 def load_design(path) -> tuple[DesignSpec, Path]:
@@ -278,6 +367,13 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
     cannot take its bounds or choices in the base scenario (a typo, a field that is not a
     scenario's, a value its schema refuses everywhere)."""
     check_base(spec, base_dir)
+    if spec.mode == "spectrum":
+        from .spectrum import FREQUENCY_FIELD
+        from .sweep import AxisSpec, SweepSpec, check_spectrum
+
+        probe = SweepSpec(base=spec.base, overrides=spec.overrides, mode="spectrum", spectrum=spec.spectrum,
+                          axes=[AxisSpec(field=FREQUENCY_FIELD, values=[spec.frequencies[0]])])
+        check_spectrum(probe, base_dir)
     base = _base_path(spec, base_dir)
     for k, var in enumerate(spec.variables):
         errors = []
@@ -429,7 +525,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     "files", "best"}."""
     from dask.distributed import Client, LocalCluster, as_completed
 
-    from .sweep import _connect, run_case
+    from .sweep import _connect
 
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
@@ -456,7 +552,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     def launch():
         trial = ask_trial(study, spec, dists)
         case = trial_case(spec, trial.number, trial.params)
-        fut = client.submit(run_case, spec_json, base, case, str(out.resolve()), False, pure=False,
+        fut = client.submit(evaluate_trial, spec_json, base, case, str(out.resolve()), pure=False,
                             key=f"granel-design-{trial.number}-{case['tag']}-{time.time_ns()}")
         in_flight[fut] = (trial, case, time.monotonic())
         return fut

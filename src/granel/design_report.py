@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from . import scenario as S
-from .design import DesignSpec, best_trials, design_scenario
-from .sweep import _base_path, run_case
+from .design import DesignSpec, best_trials, design_scenario, evaluate_trial
+from .sweep import _base_path
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
@@ -48,7 +48,7 @@ def reevaluate(spec: DesignSpec, base_dir: Path, out: Path, best: list) -> list[
         for key, extra in (("study", []), ("tight", tight)):
             sj = spec.model_copy(update={"overrides": [*spec.overrides, *extra]}).model_dump_json()
             c = dict(case, tag=f"{case['tag']}-{key}")
-            r[key] = run_case(sj, str(base_dir.resolve()), c, str(folder.resolve()), True)
+            r[key] = evaluate_trial(sj, str(base_dir.resolve()), c, str(folder.resolve()), True)
         results.append(r)
     return results
 
@@ -168,7 +168,9 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     draw_design(axes[0, 1], design_scenario(spec, base_dir, rows[1]["params"]), f"best design ({rows[1]['label']})")
     folder = out / "reevaluation"
     for r, ls in ((rows[0], "--"), (rows[1], "-")):
-        for path in sorted((folder / "cases").glob(f"{r['tight']['tag']}__*.nc")):
+        tag = r["tight"]["tag"]
+        paths = sorted((folder / "cases").glob(f"{tag}__*.nc")) or sorted((folder / "cases").glob(f"{tag}-f000__*.nc"))
+        for path in paths:  # a spectrum's first frequency
             ds = read_netcdf(path)
             t = ds["time"].values * 1e3
             w = max(float(ds["input_work"].values.max()), 1e-300)
