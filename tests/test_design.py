@@ -226,6 +226,9 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     spec, base = load_design(path)
     assert spec.sampler == "nsga2" and len(spec.objectives) == 2
     res = run_design(spec, base, tmp_path / "out", workers=2)
+    from granel.design_report import write_study_report
+
+    write_study_report(spec, base, res["study"], tmp_path / "out")
     front = res["best"]
     assert len(front) >= 5 and (tmp_path / "out" / "pareto" / "00.toml").exists()
     assert (tmp_path / "out" / "pareto.png").exists() and (tmp_path / "out" / "report.md").exists()
@@ -317,7 +320,7 @@ metric = "mobility_fwd_db"
 direction = "maximize"
 """)
     spec, base = load_design(tmp_path / "d.toml")
-    res = run_design(spec, base, tmp_path / "out", workers=1, report=False)
+    res = run_design(spec, base, tmp_path / "out", workers=1)
     m, w = 4 / 3 * math.pi * 0.005**3 * 7850, 2 * math.pi * 1e4
     A = 4 / 3 * 200e9 / (1 - 0.3**2) * math.sqrt(0.005)
     f0 = (m * w**2 / (1.5 * A ** (2 / 3))) ** 3

@@ -678,6 +678,7 @@ def design(
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
     from .design import DesignFileError, load_design, run_design
+    from .design_report import write_study_report
     from .paths import OutputPathError, check_folder_path
     from .sweep import SchedulerError
 
@@ -702,6 +703,8 @@ def design(
 
         try:
             res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress)
+            bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
+            res["files"] += write_study_report(spec, base_dir, res["study"], out)
         except SchedulerError as e:
             _fail(f"--scheduler {scheduler}: {e}", e.code)
         except S.ScenarioError as e:

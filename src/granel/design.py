@@ -516,13 +516,12 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
 
 def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
                scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
-               progress=None, report: bool = True) -> dict:
+               progress=None) -> dict:
     """Run (or continue) the study until `trials` trials (default: the design's) have finished,
     on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
     trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
-    Writes the outputs (`write_outputs`) and, with `report`, the figures, the re-evaluation of
-    the best designs and report.md (`design_report`); returns {"study", "trials", "stopped",
-    "files", "best"}."""
+    Writes trials.nc and the best designs (`write_outputs`; the figures and report.md are
+    `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best"}."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .sweep import _connect
@@ -588,10 +587,6 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     sessions.append({"wall_s": time.monotonic() - start, "trials": done - first, "workers": slots})
     study.set_user_attr("sessions", sessions)
     written = write_outputs(spec, base_dir, study, out)
-    if report:
-        from .design_report import write_study_report
-
-        written["files"] += write_study_report(spec, base_dir, study, out)
     return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],
             "best": written["best"]}
 
@@ -664,9 +659,10 @@ def best_trials(spec: DesignSpec, study) -> list:
 
 
 def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenario:
-    """The runnable scenario of a trial: the base, the design's overrides and the trial's values."""
-    case = trial_case(spec, 0, params)
-    return S.load(_base_path(spec, base_dir), [*spec.overrides, *(f"{k}={_literal(v)}" for k, v in case["overrides"].items())])
+    """The runnable scenario of a trial: the base, the design's overrides and the trial's values
+    (no values: the base scenario as the design runs it)."""
+    values = trial_case(spec, 0, params)["overrides"] if params else {}
+    return S.load(_base_path(spec, base_dir), [*spec.overrides, *(f"{k}={_literal(v)}" for k, v in values.items())])
 
 
 def _write_text(path: Path, text: str) -> None:

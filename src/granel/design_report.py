@@ -13,16 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import scenario as S
 from .design import DesignSpec, best_trials, design_scenario, evaluate_trial
-from .sweep import _base_path
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
 EXPLOIT_SHARE = 0.01
 
 
-def tighter(sc: S.Scenario) -> list[str]:
+def tighter(sc) -> list[str]:
     """Overrides that make a run about ten times more accurate than `sc`'s settings: the error
     controlled integrator's rtol and ledger_tol / 10 (and Newton's tolerances / 10); a fixed-step
     run (the paper's algorithm, Newmark, --dt) at dt / 4."""
@@ -38,8 +36,7 @@ def reevaluate(spec: DesignSpec, base_dir: Path, out: Path, best: list) -> list[
     the tighter one (`tighter`), runs kept in out/reevaluation: [{label, params, study, tight}],
     `study` and `tight` being `run_case` results."""
     folder = out / "reevaluation"
-    base_sc = S.load(_base_path(spec, base_dir), list(spec.overrides))
-    tight = tighter(base_sc)
+    tight = tighter(design_scenario(spec, base_dir, {}))
     rows = [("base", {})] + [(f"trial {t.number}", dict(t.params)) for t in best[:3]]
     results = []
     for label, params in rows:
@@ -130,7 +127,7 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
     return files
 
 
-def draw_design(ax, sc: S.Scenario, title: str) -> None:
+def draw_design(ax, sc, title: str) -> None:
     """A scenario's granules, walls and solid (no labels), in mm."""
     from .run import built_models
     from .scenario.build import present_solid
@@ -163,8 +160,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     if len(rows) < 2 or rows[1]["tight"].get("status") != "ok" or rows[0]["tight"].get("status") != "ok":
         return None
     fig, axes = plt.subplots(2, 2, figsize=(11, 8))
-    base_sc = S.load(_base_path(spec, base_dir), list(spec.overrides))
-    draw_design(axes[0, 0], base_sc, "base scenario")
+    draw_design(axes[0, 0], design_scenario(spec, base_dir, {}), "base scenario")
     draw_design(axes[0, 1], design_scenario(spec, base_dir, rows[1]["params"]), f"best design ({rows[1]['label']})")
     folder = out / "reevaluation"
     for r, ls in ((rows[0], "--"), (rows[1], "-")):
