@@ -155,6 +155,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .analysis.reciprocity import input_energy
     from .results import read_netcdf
 
     if len(rows) < 2 or rows[1]["tight"].get("status") != "ok" or rows[0]["tight"].get("status") != "ok":
@@ -169,12 +170,12 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
         for path in paths:  # a spectrum's first frequency
             ds = read_netcdf(path)
             t = ds["time"].values * 1e3
-            w = max(float(ds["input_work"].values.max()), 1e-300)
+            w = max(input_energy(ds), 1e-300)
             run = path.stem.split("__", 1)[1]
             label = f"{r['label']}, {run}"
             speed = np.hypot(ds["v_x"].values, ds["v_y"].values).max(axis=1)
             axes[1, 0].plot(t, speed, ls=ls, lw=1, label=label)
-            for name in [v for v in ds.data_vars if v.startswith("energy_") and v.count("_") == 1] + ["energy_solid"]:
+            for name in [f"energy_{str(m).lower()}" for m in dict.fromkeys(ds["medium"].values)] + ["energy_solid"]:
                 if name in ds and np.abs(ds[name].values).max() > 0:
                     axes[1, 1].plot(t, ds[name].values / w, ls=ls, lw=1, label=f"{label}: {name[7:]}")
     axes[1, 0].set(xlabel="t [ms]", ylabel="largest granule speed [m/s]", title="speed")

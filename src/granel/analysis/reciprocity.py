@@ -63,8 +63,15 @@ def driven_peak_speed(ds, label: str) -> float:
 
 
 def excitation_of(ds) -> tuple[str, np.ndarray]:
-    """(granule label, unit direction) of the first excitation of a run."""
+    """(granule label, unit direction) of the first excitation of a run; without excitations,
+    of its first initial velocity (a striker)."""
     sc = tomllib.loads(ds.attrs["scenario"])
+    if not sc.get("excitations"):
+        if not sc.get("initial_velocities"):
+            raise ValueError("the run has neither an excitation nor an initial velocity: nothing was driven")
+        iv = sc["initial_velocities"][0]
+        v = np.asarray(iv["v"], float)
+        return iv["granule"], v / np.hypot(*v) if np.hypot(*v) > 0 else v
     e = sc["excitations"][0]
     d = e.get("direction", "toward_solid")
     label = e["granule"]
@@ -114,13 +121,23 @@ def spectral_centroid(ds, modes=None, model=None) -> float:
     return float((w / (2 * np.pi)) @ avg / tot) if tot > 0 else float("nan")
 
 
+def input_energy(ds) -> float:
+    """The energy a run was given: the loads' largest work, or (a striker, no loads) the
+    energy it holds at the start [J]."""
+    w = float(ds["input_work"].values.max())
+    if w > 0:
+        return w
+    held = [f"energy_{str(m).lower()}" for m in dict.fromkeys(ds["medium"].values)] + ["energy_solid"]
+    return float(sum(ds[v].values[0] for v in held if v in ds))
+
+
 def run_metrics(ds, measured: str, modes=None, model=None) -> dict:
     """Per-run numbers: arrival at the measured granule (`pulse_arrival`: 5 % of the measured
     peak, NaN unless that peak reaches 1e-3 of the driven granule's) and at the solid (1 % of the
     input work), peak velocity, energy transmitted to the far medium, spectral centroid of the solid."""
     label, d = excitation_of(ds)
     t = ds["time"].values
-    w = float(ds["input_work"].values.max())
+    w = input_energy(ds)
     far = far_medium(ds, label)
     v = directed_velocity(ds, measured, toward_solid(tomllib.loads(ds.attrs["scenario"]), measured))
     e_far = ds[f"energy_{far.lower()}"].values / w if w > 0 else np.zeros_like(t)
@@ -134,7 +151,7 @@ def run_metrics(ds, measured: str, modes=None, model=None) -> dict:
         "energy_far_peak_frac": float(e_far.max()),
         "energy_far_final_frac": float(e_far[-1]),
         "solid_energy_peak_frac": float(ds["energy_solid"].values.max() / w) if w > 0 else 0.0,
-        "input_work_J": w,
+        "input_work_J": w,  # the loads' work, or a striker's energy
     }
     try:
         out["spectral_centroid_hz"] = spectral_centroid(ds, modes, model)

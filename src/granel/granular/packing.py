@@ -174,6 +174,63 @@ def hexagonal_columns(
     return Medium(name, lab, pos, np.full(n, R), material, side, out, contact)
 
 
+def chain(
+    name: str,
+    radii: list[float],
+    materials: list[Material],
+    side: str,
+    face: float,
+    center: float,
+    walls: tuple[str, ...] = (),
+    gap: float = 0.0,
+    grow: str | None = None,
+) -> Medium:
+    """A straight chain of touching beads, radii[0] nearest the face, grown from the face line
+    along `grow` (as `hexagonal_columns`; centred on `center` along the face), each bead of its
+    own material. Labels 1..n run from the far end to the face, as a column's do: label 1 is the
+    outermost bead. `walls`: `face` (on the face line, only away from a solid) and `outer`
+    (touching the last bead)."""
+    grow = side if grow is None else grow
+    if grow not in GROWTHS:
+        raise ValueError(f"grow must be one of {list(GROWTHS)}, got {grow!r}")
+    if side != "none" and grow != side:
+        raise ValueError(f"grow = {grow!r}: a medium on the {side} of the solid grows to the {side}")
+    if not radii or any(not r > 0 for r in radii):
+        raise ValueError(f"radii must be positive, got {radii}")
+    if len(materials) != len(radii):
+        raise ValueError(f"{len(materials)} materials for {len(radii)} beads")
+    for w in walls:
+        if w not in ("face", "outer"):
+            raise ValueError(f"walls: {w!r} is not a wall of a chain; choose from ['face', 'outer']")
+    if "face" in walls and side != "none":
+        raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
+    sgn = -1.0 if grow in ("left", "down") else 1.0
+    u, prev = [], None
+    for r in radii:
+        u.append(gap + r if prev is None else u[-1] + prev + r)
+        prev = r
+    u_out = u[-1] + radii[-1]
+
+    def frame(a, b):  # (distance from the face, position along it) -> (x, y)
+        return (face + sgn * a, b) if grow in ("left", "right") else (b, face + sgn * a)
+
+    order = list(reversed(range(len(radii))))  # label 1 = the outermost bead
+    pos = np.array([frame(u[k], center) for k in order])
+    rad = np.array([float(radii[k]) for k in order])
+    mats = [materials[k] for k in order]
+    top = max(radii)
+    made = {"face": (frame(0.0, center - top), frame(0.0, center + top), (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)),
+            "outer": (frame(u_out, center - top), frame(u_out, center + top),
+                      (-sgn, 0.0) if grow in ("left", "right") else (0.0, -sgn))}
+    out = []
+    for w in walls:
+        a, b, nrm = made[w]
+        a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
+        out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
+    n = len(radii)
+    return Medium(name, numeric_labels(n), pos, rad, mats[0], side, out, [n - 1], mats)
+
+
 def medium_from_table(name: str, rows: list[dict], material: Material, side: str = "none",
                       materials: dict[str, Material] | None = None) -> Medium:
     """A medium from explicit granules: rows of {label, x, y, radius[, material]}; a row's

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
-from ..granular.packing import Wall, hexagonal_columns, medium_from_table, read_granules_csv
+from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table, read_granules_csv
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, close_pairs, initial_state, load_scales
 from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
@@ -46,16 +46,15 @@ def build_media(sc: Scenario, base: Path | None = None):
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: {e}") from None
             if np.any(med.radius <= 0):
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: radius must be positive")
+        elif m.radii is not None:
+            face, center = _face_and_centre(m, solid)
+            mats = [sc.materials[name].material() for name in (m.materials or [m.material] * len(m.radii))]
+            try:
+                med = chain(m.name, list(m.radii), mats, m.side, face, center, tuple(m.walls or ()), m.gap, m.grow)
+            except ValueError as e:
+                raise ScenarioError(f"media.{k}: {e}") from None
         else:
-            if m.grow in ("up", "down"):
-                face, center = m.face_y or 0.0, m.center_x or 0.0
-            elif solid is not None and m.side != "none":
-                face = solid.x0 if m.side == "left" else solid.x0 + solid.width
-                center = m.center_y if m.center_y is not None else solid.y0 + 0.5 * solid.length
-            else:
-                face, center = 0.0, m.center_y if m.center_y is not None else 0.0
-            if m.face_x is not None:
-                face = m.face_x
+            face, center = _face_and_centre(m, solid)
             try:
                 med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, center, m.labels,
                                         m.wall_names(), m.gap, m.grow)
@@ -63,6 +62,19 @@ def build_media(sc: Scenario, base: Path | None = None):
                 raise ScenarioError(f"media.{k}: {e}") from None
         media.append(med)
     return media
+
+
+def _face_and_centre(m, solid) -> tuple[float, float]:
+    """Where a built medium starts: its face line (x, or y growing up or down) and the centre of
+    its first column along it (the solid's face and mid-length beside a solid, else 0)."""
+    if m.grow in ("up", "down"):
+        return m.face_y or 0.0, m.center_x or 0.0
+    if solid is not None and m.side != "none":
+        face = solid.x0 if m.side == "left" else solid.x0 + solid.width
+        center = m.center_y if m.center_y is not None else solid.y0 + 0.5 * solid.length
+    else:
+        face, center = 0.0, m.center_y if m.center_y is not None else 0.0
+    return (m.face_x if m.face_x is not None else face), center
 
 
 def solid_contacts_for(sc: Scenario, media) -> list:

@@ -170,6 +170,11 @@ class MediumSpec(_Strict):
                           "walls (bottom/top for left/right growth, left/right for up/down), outer, face")
     gap: float = Field(0.0, ge=0)
     granules_file: str | None = None
+    radii: list[Annotated[float, Field(gt=0)]] | None = Field(
+        None, description="a straight chain of touching beads instead of a hexagonal packing: their radii [m], "
+                          "from the face outward (label 1 is the outermost)")
+    materials: list[str] | None = Field(None, description="a chain's bead materials, from the face outward "
+                                                          "(default: `material` for every bead)")
 
     @field_validator("labels")
     @classmethod
@@ -186,6 +191,26 @@ class MediumSpec(_Strict):
 
     @model_validator(mode="after")
     def _shape(self):
+        if self.radii is not None:
+            for key in ("granules_file", "columns", "radius"):
+                if getattr(self, key) is not None:
+                    raise ValueError(f"{key}: a chain (radii) takes neither granules_file nor columns and radius")
+            if self.materials is not None and len(self.materials) != len(self.radii):
+                raise ValueError(f"materials: {len(self.materials)} given for {len(self.radii)} beads (radii)")
+            if self.side == "none" and self.grow is None:
+                raise ValueError("grow: a chain away from the solid (side = 'none') needs a growth direction: left, "
+                                 "right, up or down")
+            if self.side != "none" and self.grow not in (None, self.side):
+                raise ValueError(f"grow = {self.grow!r}: a medium on the {self.side} of the solid grows to the {self.side}")
+            for w in self.walls or []:
+                if w not in ("face", "outer"):
+                    raise ValueError(f"walls: {w!r} is not a wall of a chain; choose from ['face', 'outer']")
+            if self.walls is not None and "face" in self.walls and self.side != "none":
+                raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
+            return self
+        if self.materials is not None:
+            raise ValueError("materials: only a chain (radii) takes per-bead materials; a granules_file has a "
+                             "material column")
         if self.granules_file is None:
             if self.columns is None or self.radius is None:
                 raise ValueError("a medium needs either 'columns' and 'radius' (hexagonal packing) or 'granules_file'")
@@ -418,6 +443,9 @@ class Scenario(_Strict):
         for k, m in enumerate(self.media):
             if m.material not in self.materials:
                 raise ValueError(f"media.{k}.material: unknown material {m.material!r}; defined: {sorted(self.materials)}")
+            for j, name in enumerate(m.materials or []):
+                if name not in self.materials:
+                    raise ValueError(f"media.{k}.materials.{j}: unknown material {name!r}; defined: {sorted(self.materials)}")
         if self.solid is not None and self.solid.material not in self.materials:
             raise ValueError(f"solid.material: unknown material {self.solid.material!r}; defined: {sorted(self.materials)}")
         for k, w in enumerate(self.walls):
