@@ -138,6 +138,10 @@ def draw_design(ax, sc, title: str) -> None:
     if present_solid(sc) is not None:
         draw_solid(ax, sc, model, "design")
     draw_granules(ax, system, "design", labels=False)
+    if np.ptp(system.E) > 0:  # granules of several materials: each marked with its modulus
+        for g in range(system.n):
+            ax.text(*(system.pos0[g] * MM), f"{system.E[g] / 1e9:.3g}", ha="center", va="center", fontsize=6)
+        ax.text(0.01, 0.02, "numbers: Young's modulus [GPa]", transform=ax.transAxes, fontsize=6)
     draw_walls(ax, system, "design", depth, fontsize=5)
     ax.set_aspect("equal")
     ax.autoscale_view()
@@ -148,8 +152,8 @@ def draw_design(ax, sc, title: str) -> None:
 
 def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -> Path | None:
     """best.png: the base scenario and the best design drawn side by side, and their traces at
-    the tighter accuracy: the measured granule's speed and the energy held by each medium and
-    the solid over the input work."""
+    the tighter accuracy: the largest wall force (an objective on a wall force) or the largest
+    granule speed, and the energy held by each medium and the solid over the input."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -164,6 +168,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     draw_design(axes[0, 0], design_scenario(spec, base_dir, {}), "base scenario")
     draw_design(axes[0, 1], design_scenario(spec, base_dir, rows[1]["params"]), f"best design ({rows[1]['label']})")
     folder = out / "reevaluation"
+    walls_matter = any("wall" in o.metric for o in spec.objectives)
     for r, ls in ((rows[0], "--"), (rows[1], "-")):
         tag = r["tight"]["tag"]
         paths = sorted((folder / "cases").glob(f"{tag}__*.nc")) or sorted((folder / "cases").glob(f"{tag}-f000__*.nc"))
@@ -173,12 +178,15 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
             w = max(input_energy(ds), 1e-300)
             run = path.stem.split("__", 1)[1]
             label = f"{r['label']}, {run}"
-            speed = np.hypot(ds["v_x"].values, ds["v_y"].values).max(axis=1)
-            axes[1, 0].plot(t, speed, ls=ls, lw=1, label=label)
+            if walls_matter:
+                axes[1, 0].plot(t, ds["wall_force_normal"].values.max(axis=1), ls=ls, lw=1, label=label)
+            else:
+                axes[1, 0].plot(t, np.hypot(ds["v_x"].values, ds["v_y"].values).max(axis=1), ls=ls, lw=1, label=label)
             for name in [f"energy_{str(m).lower()}" for m in dict.fromkeys(ds["medium"].values)] + ["energy_solid"]:
                 if name in ds and np.abs(ds[name].values).max() > 0:
                     axes[1, 1].plot(t, ds[name].values / w, ls=ls, lw=1, label=f"{label}: {name[7:]}")
-    axes[1, 0].set(xlabel="t [ms]", ylabel="largest granule speed [m/s]", title="speed")
+    axes[1, 0].set(xlabel="t [ms]", ylabel="largest wall force [N]" if walls_matter else "largest granule speed [m/s]",
+                   title="wall force" if walls_matter else "speed")
     axes[1, 1].set(xlabel="t [ms]", ylabel="energy / input work", title="energy held (tighter accuracy)")
     for ax in axes[1]:
         ax.legend(fontsize=6)
