@@ -329,3 +329,20 @@ direction = "maximize"
     metrics = res["best"][0].user_attrs["metrics"]
     assert set(metrics) == set(band_metric_names(spec))
     assert metrics["steady_share_fwd"] == 1.0 and metrics["balance_fwd"] < 1e-5
+
+
+def test_a_constraint_keeps_the_best_design_feasible(tmp_path):
+    """The inverse problem with its answer (R = 6.31 mm, 8.27 g) ruled out by a mass limit of
+    6 g (R <= 5.68 mm): the best design obeys the limit and sits at it (within 3 % in R, where the
+    force is closest to the target), and infeasible trials are marked so in trials.nc."""
+    from granel.design import load_design, run_design
+
+    path = write_design(tmp_path, trials=40, seed=4, extra='[[constraints]]\nmetric = "granular_mass_kg"\nmax = 0.006\n')
+    spec, base = load_design(path)
+    res = run_design(spec, base, tmp_path / "out", workers=2)
+    r_max = (0.006 / (4 / 3 * math.pi * 7850)) ** (1 / 3)
+    best = res["best"][0].params["media.0.radius"]
+    assert best <= r_max and best == pytest.approx(r_max, rel=0.03)
+    ds = res["trials"]
+    heavy = ds["metric_granular_mass_kg"].values > 0.006
+    assert heavy.any() and not ds["feasible"].values[heavy].any() and ds["feasible"].values[~heavy].all()

@@ -70,6 +70,19 @@ from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, c
 INTERRUPTED = "interrupted"
 
 
+def _trial_constraints() -> bool:
+    """Whether this Optuna stores constraints on the trial (5.0 on) rather than through a
+    sampler's constraints_func (deprecated there)."""
+    try:
+        from optuna.trial import Trial
+    except ImportError:  # pragma: no cover - optuna is a dependency
+        return False
+    return hasattr(Trial, "set_constraint")
+
+
+TRIAL_CONSTRAINTS = _trial_constraints()
+
+
 class DesignFileError(S.ScenarioError):
     """A design file that cannot be used; the message names the file and the field."""
 
@@ -401,7 +414,8 @@ def make_sampler(spec: DesignSpec, seed: int):
     for several under "auto"; constraints through Optuna's constraints_func)."""
     import optuna
 
-    cons = (lambda t: t.user_attrs["constraints"]) if spec.constraints else None
+    # constraints: stored on each trial (Trial.set_constraint, Optuna 5) or read by constraints_func (Optuna 4)
+    cons = (lambda t: t.user_attrs["constraints"]) if spec.constraints and not TRIAL_CONSTRAINTS else None
     kind = spec.sampler
     if kind == "auto":
         kind = "tpe" if len(spec.objectives) == 1 else "nsga2"
@@ -510,6 +524,9 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
         study.tell(trial, state=TrialState.FAIL)
         return reason
     trial.set_user_attr("constraints", cons)
+    if TRIAL_CONSTRAINTS:
+        for k, (c, v) in enumerate(zip(spec.constraints, cons)):
+            trial.set_constraint(f"{k}:{c.metric}", v)
     study.tell(trial, values if len(values) > 1 else values[0])
     return reason
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import DesignSpec, best_trials, design_scenario, evaluate_trial
+from .design import TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, evaluate_trial
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
@@ -117,7 +117,7 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
     if len(spec.objectives) > 1:
         ax = vis.plot_pareto_front(study, target_names=[o.name for o in spec.objectives],
                                    constraints_func=(lambda t: t.user_attrs.get("constraints", [0.0]))
-                                   if spec.constraints else None)
+                                   if spec.constraints and not TRIAL_CONSTRAINTS else None)
         save(ax, "pareto.png")
     if len(spec.variables) >= 2 and len(done) >= 4:
         for k, o in enumerate(spec.objectives[:1]):
