@@ -331,6 +331,7 @@ direction = "maximize"
     assert metrics["steady_share_fwd"] == 1.0 and metrics["balance_fwd"] < 1e-5
 
 
+@pytest.mark.slow
 def test_a_constraint_keeps_the_best_design_feasible(tmp_path):
     """The inverse problem with its answer (R = 6.31 mm, 8.27 g) ruled out by a mass limit of
     6 g (R <= 5.68 mm): the best design obeys the limit and sits at it (within 3 % in R, where the
