@@ -347,3 +347,17 @@ def test_a_constraint_keeps_the_best_design_feasible(tmp_path):
     ds = res["trials"]
     heavy = ds["metric_granular_mass_kg"].values > 0.006
     assert heavy.any() and not ds["feasible"].values[heavy].any() and ds["feasible"].values[~heavy].all()
+
+
+def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
+    """A study stored before a field was added (here `population` and `frequencies`) continues:
+    the stored fields must match and the new ones be at their defaults; a changed value is
+    another design."""
+    from granel.design import load_design, same_design
+
+    spec, _ = load_design(write_design(tmp_path))
+    mine = json.loads(spec.model_dump_json(exclude={"trials"}))
+    older = {k: v for k, v in mine.items() if k not in ("population", "frequencies")}
+    assert same_design(older, mine)
+    assert not same_design(older, {**mine, "population": 12})
+    assert not same_design({**older, "seed": 99}, mine)

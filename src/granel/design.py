@@ -467,10 +467,18 @@ def open_study(spec: DesignSpec, out: Path):
     held = study.user_attrs.get("design")
     if held is None:
         study.set_user_attr("design", mine)
-    elif held != mine:
+    elif not same_design(held, mine):
         raise DesignFileError(f"-o {out}: it holds a study of another design (name {held.get('name')!r}); "
                               "write this one to another folder")
     return study
+
+
+def same_design(held: dict, mine: dict) -> bool:
+    """Whether a stored design (as JSON) is this one: every stored field equal, and any field
+    the stored one lacks (added by a later granel) at its default."""
+    defaults = json.loads(DesignSpec.model_construct().model_dump_json(exclude={"trials"}, warnings=False))
+    return all(mine.get(k) == v for k, v in held.items()) and \
+        all(k in held or k not in defaults or v == defaults[k] for k, v in mine.items())
 
 
 def recover_interrupted(study) -> int:
