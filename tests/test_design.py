@@ -361,3 +361,21 @@ def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
     assert same_design(older, mine)
     assert not same_design(older, {**mine, "population": 12})
     assert not same_design({**older, "seed": 99}, mine)
+
+
+def test_timeout_stops_the_study_and_a_rerun_continues(tmp_path):
+    """--timeout stops launching trials (exit 0, says so, writes the outputs of the trials done);
+    the same command without it continues to the design's count."""
+    from granel.results import read_netcdf
+
+    path = write_design(tmp_path, trials=200, seed=1)
+    res = runner.invoke(app, ["design", str(path), "-o", str(tmp_path / "out"), "--workers", "1", "--timeout", "1s"])
+    assert res.exit_code == 0, res.output
+    assert "stopped after" in " ".join(res.output.split())
+    first = read_netcdf(tmp_path / "out" / "trials.nc").sizes["trial"]
+    assert 1 <= first < 200
+    res = runner.invoke(app, ["design", str(path), "-o", str(tmp_path / "out"), "--workers", "1", "--trials",
+                              str(first + 3)])
+    assert res.exit_code == 0, res.output
+    ds = read_netcdf(tmp_path / "out" / "trials.nc")
+    assert (ds["status"].values == "ok").sum() == first + 3
