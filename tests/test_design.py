@@ -138,6 +138,7 @@ def test_a_killed_study_resumes_to_the_same_trials(tmp_path):
     assert again.sizes["trial"] == resumed.sizes["trial"]
 
 
+@pytest.mark.slow
 def test_a_study_with_a_third_of_its_designs_invalid_completes(tmp_path):
     """gap in [-2, 4] um: a negative gap is refused by the scenario's schema, so about a third of
     the designs fail, each with its reason, and the study still reaches its trials."""
@@ -363,6 +364,7 @@ def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
     assert not same_design({**older, "seed": 99}, mine)
 
 
+@pytest.mark.slow
 def test_timeout_stops_the_study_and_a_rerun_continues(tmp_path):
     """--timeout stops launching trials (exit 0, says so, writes the outputs of the trials done);
     the same command without it continues to the design's count."""
