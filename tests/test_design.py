@@ -381,3 +381,18 @@ def test_timeout_stops_the_study_and_a_rerun_continues(tmp_path):
     assert res.exit_code == 0, res.output
     ds = read_netcdf(tmp_path / "out" / "trials.nc")
     assert (ds["status"].values == "ok").sum() == first + 3
+
+
+@pytest.mark.parametrize("args, code, says", [
+    (["--scheduler", "not an address"], 2, "not a scheduler address"),
+    (["--workers", "0"], 2, "--workers 0"),
+    (["--trials", "0"], 2, "--trials 0"),
+    (["--timeout", "soon"], 2, "--timeout 'soon'"),
+])
+def test_bad_design_options_exit_with_their_code(tmp_path, args, code, says):
+    """Options are refused naming themselves, before any trial runs (nothing written)."""
+    path = write_design(tmp_path, trials=2)
+    res = runner.invoke(app, ["design", str(path), "-o", str(tmp_path / "out"), *args])
+    assert res.exit_code == code, res.output
+    assert says in " ".join(res.output.split())
+    assert not (tmp_path / "out" / "study.journal").exists() and not (tmp_path / "out" / "trials.nc").exists()

@@ -555,18 +555,22 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
     target = int(trials or spec.trials)
     check_design(spec, base_dir)
+    client = _connect(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    study = open_study(spec, out)
-    recover_interrupted(study)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        study = open_study(spec, out)
+        recover_interrupted(study)
+    except BaseException:
+        if client is not None:
+            client.close()
+        raise
     dists = {v.field: v.distribution() for v in spec.variables}
     spec_json = spec.model_dump_json()
     base = str(base_dir.resolve())
     start = time.monotonic()
     cluster = None
-    if scheduler:
-        client = _connect(scheduler, timeout)
-    else:
+    if client is None:
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(cluster)
     slots = max(1, len(client.scheduler_info()["workers"]))
