@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
 
@@ -501,11 +502,25 @@ def bench(
         console.print(f"granel paper (no animations): {res['paper_study_s']:.1f} s")
 
 
+@contextmanager
+def _cluster_errors(scheduler, source, write_error: str):
+    """A command on a dask cluster ends on a scheduler error (exit 2 or 4), an invalid scenario
+    or input file (2, naming `source`) or an unwritable output (4, `write_error`)."""
+    from .sweep import SchedulerError
+
+    try:
+        yield
+    except SchedulerError as e:
+        _fail(f"--scheduler {scheduler}: {e}", e.code)
+    except S.ScenarioError as e:
+        _fail(f"{source}: {e}")
+    except OSError as e:
+        _fail(f"{write_error} ({e})", 4)
+
+
 def _run_cases(title: str, n: int, run, scheduler, source, write_error: str):
     """Run a sweep's n cases, `run(progress)`, under a progress bar: (its summary, the failed
     cases). A scheduler, scenario or file error ends the command with its exit code (2 or 4)."""
-    from .sweep import SchedulerError
-
     failed = []
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
@@ -516,14 +531,8 @@ def _run_cases(title: str, n: int, run, scheduler, source, write_error: str):
                 failed.append(r)
             bar.update(task, advance=1)
 
-        try:
+        with _cluster_errors(scheduler, source, write_error):
             return run(progress), failed
-        except SchedulerError as e:
-            _fail(f"--scheduler {scheduler}: {e}", e.code)
-        except S.ScenarioError as e:
-            _fail(f"{source}: {e}")
-        except OSError as e:
-            _fail(f"{write_error} ({e})", 4)
 
 
 @app.command()
@@ -680,7 +689,6 @@ def design(
     from .design import DesignFileError, load_design, run_design
     from .design_report import write_study_report
     from .paths import OutputPathError, check_folder_path
-    from .sweep import SchedulerError
 
     try:
         spec, base_dir = load_design(design_file)
@@ -701,16 +709,10 @@ def design(
                 failed.append((number, status))
             bar.update(task, completed=done)
 
-        try:
+        with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
             res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress)
             bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
             res["files"] += write_study_report(spec, base_dir, res["study"], out)
-        except SchedulerError as e:
-            _fail(f"--scheduler {scheduler}: {e}", e.code)
-        except S.ScenarioError as e:
-            _fail(f"{design_file}: {e}")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the study ({e})", 4)
     ds = res["trials"]
     ok = int((ds["status"].values == "ok").sum())
     t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],

@@ -229,38 +229,38 @@ def _pvd(path: Path, entries: list[tuple[float, str]]) -> None:
     path.write_text("\n".join(lines))
 
 
+def _vtu_series(stage: Path, name: str, frames, tick: Callable[[], None]) -> list[str]:
+    """name/name_000000.vtu, ... from frames of (time, meshio.Mesh), and name.pvd over them."""
+    import meshio
+
+    (stage / name).mkdir(exist_ok=True)
+    entries = []
+    for k, (t, mesh) in enumerate(frames):
+        path = f"{name}/{name}_{k:06d}.vtu"
+        meshio.write(stage / path, mesh, file_format="vtu")
+        entries.append((t, path))
+        tick()
+    _pvd(stage / f"{name}.pvd", entries)
+    return [path for _, path in entries] + [f"{name}.pvd"]
+
+
 def write_vtk(ds, system, model, elastic: tuple[float, float], stage: Path, tick: Callable[[], None]) -> list[str]:
     import meshio
 
-    files = []
-    times = ds["time"].values.astype(float)
-    n = system.n
-    (stage / "granules").mkdir(exist_ok=True)
-    entries = []
-    for k, t in enumerate(times):
-        g = granule_frame(ds, system, k)
-        name = f"granules/granules_{k:06d}.vtu"
-        mesh = meshio.Mesh(g.pop("points"), [("vertex", np.arange(n, dtype=np.int64)[:, None])], point_data=g)
-        meshio.write(stage / name, mesh, file_format="vtu")
-        entries.append((t, name))
-        files.append(name)
-        tick()
-    _pvd(stage / "granules.pvd", entries)
-    files.append("granules.pvd")
+    vertices = [("vertex", np.arange(system.n, dtype=np.int64)[:, None])]
+
+    def granules():
+        for k, t in enumerate(ds["time"].values.astype(float)):
+            g = granule_frame(ds, system, k)
+            yield t, meshio.Mesh(g.pop("points"), vertices, point_data=g)
+
+    files = _vtu_series(stage, "granules", granules(), tick)
     if has_solid(ds, model):
-        (stage / "solid").mkdir(exist_ok=True)
         pts, cells = solid_points(model), solid_cells(model)
-        entries = []
-        for k, (t, u, v, c) in enumerate(solid_frames(ds, model, elastic)):
-            name = f"solid/solid_{k:06d}.vtu"
-            mesh = meshio.Mesh(pts, cells, point_data={"displacement": u, "velocity": v},
-                               cell_data={n: [a] for n, a in c.items()})
-            meshio.write(stage / name, mesh, file_format="vtu")
-            entries.append((t, name))
-            files.append(name)
-            tick()
-        _pvd(stage / "solid.pvd", entries)
-        files.append("solid.pvd")
+        frames = ((t, meshio.Mesh(pts, cells, point_data={"displacement": u, "velocity": v},
+                                  cell_data={n: [a] for n, a in c.items()}))
+                  for t, u, v, c in solid_frames(ds, model, elastic))
+        files += _vtu_series(stage, "solid", frames, tick)
     return files
 
 

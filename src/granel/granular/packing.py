@@ -72,6 +72,20 @@ def numeric_labels(n: int) -> list[str]:
     return [str(k + 1) for k in range(n)]
 
 
+def granule_labels(labels: str | list[str], n: int) -> list[str]:
+    """n labels: 'numeric' (1..n), 'alpha' (A..Z, AA, ...) or the list given (n of them)."""
+    if isinstance(labels, str):
+        if labels == "numeric":
+            return numeric_labels(n)
+        if labels == "alpha":
+            return alpha_labels(n)
+        raise ValueError(f"labels must be 'numeric', 'alpha' or a list, got {labels!r}")
+    lab = [str(s) for s in labels]
+    if len(lab) != n:
+        raise ValueError(f"{len(lab)} labels given for {n} granules")
+    return lab
+
+
 GROWTHS = ("left", "right", "up", "down")
 
 
@@ -141,17 +155,7 @@ def hexagonal_columns(
 
     pos = np.array([frame(u, s) for u, s in us])
     n = len(pos)
-    if isinstance(labels, str):
-        if labels == "numeric":
-            lab = numeric_labels(n)
-        elif labels == "alpha":
-            lab = alpha_labels(n)
-        else:
-            raise ValueError(f"labels must be 'numeric', 'alpha' or a list, got {labels!r}")
-    else:
-        lab = [str(s) for s in labels]
-        if len(lab) != n:
-            raise ValueError(f"{len(lab)} labels given for {n} granules")
+    lab = granule_labels(labels, n)
     contact = list(range(n - columns[0], n))
     u_out = R + gap + (len(columns) - 1) * R * math.sqrt(3.0) + R
     s_lo, s_hi = float(us[:, 1].min() - R), float(us[:, 1].max() + R)

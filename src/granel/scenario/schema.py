@@ -197,16 +197,8 @@ class MediumSpec(_Strict):
                     raise ValueError(f"{key}: a chain (radii) takes neither granules_file nor columns and radius")
             if self.materials is not None and len(self.materials) != len(self.radii):
                 raise ValueError(f"materials: {len(self.materials)} given for {len(self.radii)} beads (radii)")
-            if self.side == "none" and self.grow is None:
-                raise ValueError("grow: a chain away from the solid (side = 'none') needs a growth direction: left, "
-                                 "right, up or down")
-            if self.side != "none" and self.grow not in (None, self.side):
-                raise ValueError(f"grow = {self.grow!r}: a medium on the {self.side} of the solid grows to the {self.side}")
-            for w in self.walls or []:
-                if w not in ("face", "outer"):
-                    raise ValueError(f"walls: {w!r} is not a wall of a chain; choose from ['face', 'outer']")
-            if self.walls is not None and "face" in self.walls and self.side != "none":
-                raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
+            self._check_growth("a chain")
+            self._check_walls(("face", "outer"), "a chain")
             return self
         if self.materials is not None:
             raise ValueError("materials: only a chain (radii) takes per-bead materials; a granules_file has a "
@@ -214,12 +206,7 @@ class MediumSpec(_Strict):
         if self.granules_file is None:
             if self.columns is None or self.radius is None:
                 raise ValueError("a medium needs either 'columns' and 'radius' (hexagonal packing) or 'granules_file'")
-            if self.side == "none" and self.grow is None:
-                raise ValueError("grow: a hexagonal packing away from the solid (side = 'none') needs a growth "
-                                 "direction: left, right, up or down")
-            if self.side != "none" and self.grow not in (None, self.side):
-                raise ValueError(f"grow = {self.grow!r}: a medium on the {self.side} of the solid grows to the "
-                                 f"{self.side} (use side = 'none' for a medium elsewhere)")
+            self._check_growth("a hexagonal packing")
             vertical = self.grow in ("up", "down")
             for key in (("face_x", "center_y") if vertical else ("face_y", "center_x")):
                 if getattr(self, key) is not None:
@@ -232,13 +219,7 @@ class MediumSpec(_Strict):
                     if getattr(self, key) is not None and getattr(self, key) != all(w in self.walls for w in names):
                         raise ValueError(f"walls = {self.walls} contradicts {key} = "
                                          f"{str(getattr(self, key)).lower()}: give one of them")
-                for w in self.walls:
-                    if w not in (lo, hi, "outer", "face"):
-                        raise ValueError(f"walls: {w!r} is not a wall of a medium growing {self.grow or self.side}; "
-                                         f"choose from {[lo, hi, 'outer', 'face']}")
-                if "face" in self.walls and self.side != "none":
-                    raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' "
-                                     "has a face wall")
+                self._check_walls((lo, hi, "outer", "face"), f"a medium growing {self.grow or self.side}")
                 if len(set(self.walls)) != len(self.walls):
                     raise ValueError(f"walls: {self.walls} names a wall twice")
             else:  # the switches' defaults, visible in the resolved scenario (set without re-validation)
@@ -252,6 +233,24 @@ class MediumSpec(_Strict):
                     raise ValueError(f"{key}: a medium from granules_file takes its geometry from the file "
                                      "(add walls with [[walls]])")
         return self
+
+    def _check_growth(self, what: str) -> None:
+        """A medium away from the solid needs a growth direction; one beside it grows away from it."""
+        if self.side == "none" and self.grow is None:
+            raise ValueError(f"grow: {what} away from the solid (side = 'none') needs a growth direction: left, "
+                             "right, up or down")
+        if self.side != "none" and self.grow not in (None, self.side):
+            raise ValueError(f"grow = {self.grow!r}: a medium on the {self.side} of the solid grows to the "
+                             f"{self.side} (use side = 'none' for a medium elsewhere)")
+
+    def _check_walls(self, allowed: tuple[str, ...], what: str) -> None:
+        """`walls` names only walls of this medium, and a face wall only away from the solid."""
+        for w in self.walls or []:
+            if w not in allowed:
+                raise ValueError(f"walls: {w!r} is not a wall of {what}; choose from {list(allowed)}")
+        if self.walls is not None and "face" in self.walls and self.side != "none":
+            raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has a "
+                             "face wall")
 
     def wall_names(self) -> tuple[str, ...]:
         """The walls of a hexagonal packing: `walls`, or the channel and outer walls' switches."""
