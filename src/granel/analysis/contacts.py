@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..granular.static import hertz_force_stiffness
 from ..materials import effective_modulus, effective_radius, hertz_coefficient
 
 
@@ -35,8 +36,7 @@ def peak_pair_force(ds, system) -> float:
     peak = 0.0
     for start in range(0, x.shape[0], 512):  # blocks of outputs: memory stays at 512 x pairs
         gap = np.hypot(x[start:start + 512, j] - x[start:start + 512, i], y[start:start + 512, j] - y[start:start + 512, i])
-        delta = np.maximum(R[i] + R[j] - gap, 0.0)
-        peak = max(peak, float((A * delta**1.5).max()))
+        peak = max(peak, float(hertz_force_stiffness(A, R[i] + R[j] - gap)[0].max()))
     return peak
 
 

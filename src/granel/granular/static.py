@@ -72,7 +72,7 @@ def constant_loads(system) -> np.ndarray:
     return F
 
 
-def _hertz(A, delta):
+def hertz_force_stiffness(A, delta):
     """Force A delta^(3/2) and stiffness 3/2 A delta^(1/2) of loaded contacts (delta > 0), eq. (2)."""
     r = np.sqrt(np.maximum(delta, 0.0))
     return A * np.maximum(delta, 0.0) * r, 1.5 * A * r
@@ -111,7 +111,7 @@ class _Balance:
         on = R[i] + R[j] - dist > 0
         i, j, A, d, dist = i[on], j[on], A[on], d[on], dist[on]
         nrm = d / dist[:, None]
-        f, k = _hertz(A, R[i] + R[j] - dist)
+        f, k = hertz_force_stiffness(A, R[i] + R[j] - dist)
         np.add.at(F, j, f[:, None] * nrm)
         np.add.at(F, i, -f[:, None] * nrm)
         eye = np.eye(2)[None]
@@ -126,7 +126,7 @@ class _Balance:
         on = (delta > 0) & (along >= 0) & (along <= m.walls.length[w])
         g, w, A, delta = g[on], w[on], A[on], delta[on]
         nw = m.walls.normal[w]
-        f, k = _hertz(A, delta)
+        f, k = hertz_force_stiffness(A, delta)
         np.add.at(F, g, f[:, None] * nw)
         Kxx.append((g, g, k[:, None, None] * _outer(nw)))
         wall_data = (np.stack([g, w], axis=1), f, delta)
@@ -136,7 +136,7 @@ class _Balance:
         gap = np.einsum("ki,ki->k", m.points.p + u - x[g], nc_)
         delta = R[g] - gap
         on = delta > 0
-        f, k = _hertz(A, np.where(on, delta, 0.0))
+        f, k = hertz_force_stiffness(A, np.where(on, delta, 0.0))
         np.add.at(F, g, -f[:, None] * nc_)
         Fs[:] = f[:, None] * nc_
         kk = k[:, None, None] * _outer(nc_)
