@@ -93,6 +93,8 @@ class VariableSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     field: str = Field(min_length=1)
+    tied: list[str] = Field(default_factory=list, description="more fields that take the same value (e.g. every "
+                                                               "bead's radius of a chain)")
     low: float | None = None
     high: float | None = None
     log: bool = False
@@ -101,6 +103,11 @@ class VariableSpec(BaseModel):
 
     @model_validator(mode="after")
     def _kind(self):
+        for k, f in enumerate(self.tied):
+            if not f.strip():
+                raise ValueError(f"{self.field}: tied.{k} is empty")
+        if len(set([self.field, *self.tied])) != len(self.tied) + 1:
+            raise ValueError(f"{self.field}: tied repeats a field ({[self.field, *self.tied]})")
         if self.choices is not None:
             if self.low is not None or self.high is not None or self.log or self.integer:
                 raise ValueError(f"{self.field}: a categorical variable takes choices only (no low, high, log, integer)")
@@ -118,6 +125,11 @@ class VariableSpec(BaseModel):
         if self.integer and (self.low != int(self.low) or self.high != int(self.high)):
             raise ValueError(f"{self.field}: an integer variable needs whole bounds, got {self.low}, {self.high}")
         return self
+
+    @property
+    def fields(self) -> list[str]:
+        """Every field this variable sets: its own and the tied ones."""
+        return [self.field, *self.tied]
 
     @property
     def kind(self) -> str:
@@ -216,15 +228,20 @@ class ConstraintSpec(BaseModel):
 
 
 class MetricError(ValueError):
-    """An objective or constraint whose metric the case did not produce, or produced as NaN."""
+    """An objective or constraint whose metric the case did not produce, or produced as NaN;
+    `metric` names it."""
+
+    def __init__(self, msg: str, metric: str = ""):
+        super().__init__(msg)
+        self.metric = metric
 
 
 def _metric(metrics: dict, name: str) -> float:
     if name not in metrics:
-        raise MetricError(f"no metric {name!r} in this case; it has {sorted(metrics)}")
+        raise MetricError(f"no metric {name!r} in this case; it has {sorted(metrics)}", name)
     v = metrics[name]
     if not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise MetricError(f"metric {name!r} is {v!r}")
+        raise MetricError(f"metric {name!r} is {v!r}", name)
     return float(v)
 
 
@@ -259,7 +276,7 @@ class DesignSpec(CaseSpec):
                 if item.metric not in known:
                     raise ValueError(f"{what}.{k}.metric = {item.metric!r}: not a metric of a {self.mode!r} case; "
                                      f"choose from {list(known)}")
-        fields = [v.field for v in self.variables]
+        fields = [f for v in self.variables for f in v.fields]
         if len(set(fields)) != len(fields):
             raise ValueError(f"variables: a field appears twice in {fields}")
         names = [o.name for o in self.objectives]
@@ -392,19 +409,20 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
         errors = []
         for v in var.points():
             try:
-                S.load(base, [*spec.overrides, f"{var.field}={_literal(v)}"])
+                S.load(base, [*spec.overrides, *(f"{f}={_literal(v)}" for f in var.fields)])
             except S.ScenarioError as e:
                 errors.append((v, str(e)))
         if len(errors) == len(var.points()):
             v, msg = errors[0]
-            raise DesignFileError(f"variables.{k}.field = {var.field!r}: the base scenario refuses it "
+            raise DesignFileError(f"variables.{k}.field = {var.field!r}{' (or a tied field)' if var.tied else ''}: the "
+                                  "base scenario refuses it "
                                   f"({var.field} = {v!r}: {' '.join(msg.split())})")
 
 
 def trial_case(spec: DesignSpec, number: int, params: dict) -> dict:
     """A trial as a sweep case: its overrides and a tag named by its values (so that a replayed
     trial, or a repeated design, finds its finished case)."""
-    overrides = {v.field: _value(params[v.field]) for v in spec.variables}
+    overrides = {f: _value(params[v.field]) for v in spec.variables for f in v.fields}
     digest = hashlib.sha1(json.dumps(overrides, sort_keys=True, default=repr).encode()).hexdigest()[:12]
     return {"index": [number], "overrides": overrides, "tag": f"trial-{digest}"}
 
@@ -513,7 +531,8 @@ def score(spec: DesignSpec, result: dict) -> tuple[list[float] | None, list[floa
         values = [o.value(metrics) for o in spec.objectives]
         cons = [c.violation(metrics) for c in spec.constraints]
     except MetricError as e:
-        return None, [], f"error: {e}"
+        note = result.get("notes", {}).get(e.metric)  # why the case could not measure it
+        return None, [], f"error: {e}" + (f": {note}" if note else "")
     return values, cons, "ok"
 
 

@@ -50,8 +50,9 @@ from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 MAX_CASES = 100_000
 # the version of the metric definitions: bumped when one changes (2: arrivals relative to the
 # driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
-# `force_metrics`), so that cached results are recomputed
-METRIC_RULES = 3
+# `force_metrics`; 4: a chain's measured cut-off, `chain_metrics`), so that cached results are
+# recomputed
+METRIC_RULES = 4
 
 
 class SweepFileError(S.ScenarioError):
@@ -343,7 +344,9 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
     Metrics (reciprocity mode, per direction): arrival_*_s at the measured granule follows
     `analysis.reciprocity.pulse_arrival` (5 % of the measured peak, NaN unless that peak reaches
     1e-3 of the driven granule's peak speed, so that round-off never counts as an arrival);
-    arrival_solid_*_s is the first time the solid holds 1 % of the input work."""
+    arrival_solid_*_s is the first time the solid holds 1 % of the input work. Run mode adds
+    `chain_metrics` (cutoff_Hz), NaN where a run has no precompressed chain, its reason under
+    `notes`."""
     from .analysis.reciprocity import reciprocity_metrics, run_metrics
     from .results import write_netcdf
     from .run import run_scenario
@@ -393,6 +396,10 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
             measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
             r = run_metrics(ds, measured)
             res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
+            chain, notes = chain_metrics(scenarios[0][1], ds)
+            res["metrics"].update(chain)
+            if notes:
+                res["notes"] = notes
         res["metrics"].update(force_metrics(scenarios, runs))
         res["solver_s"] = sum(float(ds.attrs.get("solver_wall_time_s", np.nan)) for ds in runs.values())
         res["status"] = "ok"
@@ -412,6 +419,7 @@ RUN_METRICS = ("arrival_measured_s", "arrival_solid_s", "peak_velocity_m_s", "en
 RECIPROCITY_METRICS = ("nonreciprocity_index", "arrival_fwd_s", "arrival_bwd_s", "peak_velocity_fwd", "peak_velocity_bwd",
                        "energy_far_fwd", "energy_far_bwd", "solid_energy_fwd", "solid_energy_bwd", "centroid_fwd_hz",
                        "centroid_bwd_hz", "arrival_solid_fwd_s", "arrival_solid_bwd_s")
+CHAIN_METRICS = ("cutoff_Hz",)
 SIZE_METRICS = ("granular_mass_kg", "footprint_m2")
 PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
 
@@ -419,11 +427,29 @@ PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
 def case_metric_names(mode: str) -> tuple[str, ...]:
     """The metrics a case of `mode` ("run" or "reciprocity") reports (see `run_case`)."""
     if mode == "run":
-        return RUN_METRICS + SIZE_METRICS + PEAK_METRICS
+        return RUN_METRICS + CHAIN_METRICS + SIZE_METRICS + PEAK_METRICS
     if mode == "reciprocity":
         return RECIPROCITY_METRICS + SIZE_METRICS + tuple(n.replace("_N", f"{d}_N") for n in PEAK_METRICS
                                                           for d in ("_fwd", "_bwd"))
     raise ValueError(f"mode {mode!r}: its metrics depend on the spectrum's settings")
+
+
+def chain_metrics(sc: S.Scenario, ds) -> tuple[dict[str, float], dict[str, str]]:
+    """A run's chain metrics and, for each one that is NaN, why: cutoff_Hz, the cut-off of a
+    precompressed monatomic chain rung by a pulse (`analysis.narrowband.cutoff_frequency`: its
+    highest mode measured in the free response, over the mode's share of the cut-off for the
+    chain's ends). A run without a static precompression is NaN at once (its reason noted); a
+    chain's costs a modal fit of its beads' velocities (about 0.1 s for 8 beads)."""
+    from .analysis.narrowband import CutoffError, cutoff_frequency
+    from .scenario.build import build_granular
+
+    try:
+        if "equilibrium_contact" not in ds:
+            raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant "
+                              "load): a cut-off belongs to a precompressed chain")
+        return {"cutoff_Hz": cutoff_frequency(ds, build_granular(sc, sc.base)[0]).cutoff_hz}, {}
+    except CutoffError as e:
+        return {"cutoff_Hz": float("nan")}, {"cutoff_Hz": str(e)}
 
 
 def force_metrics(scenarios: list[tuple[str, S.Scenario]], runs: dict) -> dict[str, float]:

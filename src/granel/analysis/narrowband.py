@@ -18,6 +18,8 @@ from fractions import Fraction
 
 import numpy as np
 
+from .signals import damped_modes
+
 
 @dataclass(frozen=True)
 class Drive:
@@ -120,3 +122,279 @@ def transmissibility(measured_amplitude: float, driven_amplitude: float) -> floa
 def nonreciprocity_db(forward, backward):
     """20 log10 of forward over backward transmissibility [dB] (0: reciprocal)."""
     return 20.0 * np.log10(np.asarray(forward, float) / np.asarray(backward, float))
+
+
+# ---------------------------------------------------------------- a chain's cut-off
+
+
+class CutoffError(ValueError):
+    """A run whose chain cut-off cannot be measured; the message says why."""
+
+
+@dataclass(frozen=True)
+class ChainCutoff:
+    """A precompressed monatomic chain's cut-off measured from a run (`cutoff_frequency`)."""
+
+    cutoff_hz: float  # f_c = f_top / factor
+    top_mode_hz: float  # the highest mode's undamped frequency, measured
+    top_damping_ratio: float  # its damping ratio, measured
+    factor: float  # f_top / f_c of the linearised chain with these ends (`chain_mode_factors`)
+    beads: tuple[str, ...]  # the chain's beads, end to end
+    end_stiffness: tuple[float, float]  # each end's wall stiffness over the pair stiffness (0: free)
+    modes_hz: np.ndarray  # the chain's modes found (undamped frequencies), ascending
+    window: tuple[float, float]  # the free response analysed [s]
+    strain: float  # the largest |delta - delta0| / delta0 of a pair over the record
+    spread: float  # |f_top from the window's first 3/4 / f_top - 1|: the fit's own check
+
+
+def chain_mode_factors(n: int, k_first: float = 0.0, k_last: float = 0.0) -> np.ndarray:
+    """The normal modes of a linearised monatomic chain of n beads (mass m, pair stiffness K)
+    whose end beads also press on walls of stiffness k_first K and k_last K (0: a free end), as
+    fractions of the infinite chain's cut-off w_c = 2 sqrt(K / m): sqrt(eig(T) / 4), ascending,
+    with T = tridiag(-1, 2, -1) except its corners 1 + k_first and 1 + k_last (M^-1 K in units
+    of K / m). Closed forms: a free end and a wall of twice the pair stiffness (Hertz: a sphere on
+    a rigid wall of its own material, under the chain's force, is 2^(3/2) times a pair's A, so
+    twice its stiffness) give sin((2j - 1) pi / (4n)), j = 1..n, the top one cos(pi / (4n)); two
+    free ends sin((j - 1) pi / (2n)); walls of the pair stiffness at both ends sin(j pi / (2(n + 1)))."""
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"a chain needs at least one bead, got {n}")
+    if n == 1:
+        return np.array([math.sqrt(max(k_first + k_last, 0.0) / 4.0)])
+    d = np.full(n, 2.0)
+    d[0], d[-1] = 1.0 + k_first, 1.0 + k_last
+    T = np.diag(d) - np.diag(np.ones(n - 1), 1) - np.diag(np.ones(n - 1), -1)
+    return np.sqrt(np.clip(np.linalg.eigvalsh(T), 0.0, None) / 4.0)
+
+
+def _chain_contacts(ds, system):
+    """The precompressed chain of a run from its equilibrium contacts: (beads in order, pair
+    stiffness per link, {bead: wall stiffness}); CutoffError when they are not one chain."""
+    labels = [str(g) for g in ds["granule"].values]
+    if labels != list(system.labels):
+        raise CutoffError("the granular system given is not the run's (its granules differ)")
+    index = {lab: k for k, lab in enumerate(labels)}
+    walls = {str(w) for w in ds["wall"].values} if "wall" in ds else set()
+    names = [str(c) for c in ds["equilibrium_contact"].values]
+    force = np.asarray(ds["equilibrium_force"].values, float)
+    overlap = np.asarray(ds["equilibrium_overlap"].values, float)
+    pairs: dict[tuple[int, int], float] = {}
+    on_wall: dict[int, float] = {}
+    for name, F, d in zip(names, force, overlap):
+        if not (F > 0 and d > 0):
+            continue
+        K = 1.5 * F / d  # Hertz F = A d^(3/2): dF/dd = 3/2 F / d
+        split = [p for p, ch in enumerate(name) if ch == "|" and name[:p] in index and name[p + 1:] in walls]
+        if split:
+            g = index[name[:split[0]]]
+            on_wall[g] = on_wall.get(g, 0.0) + K
+            continue
+        split = [p for p, ch in enumerate(name) if ch == "-" and name[:p] in index and name[p + 1:] in index]
+        if not split:
+            raise CutoffError(f"equilibrium contact {name!r} is neither a pair nor a wall contact")
+        i, j = index[name[:split[0]]], index[name[split[0] + 1:]]
+        pairs[(min(i, j), max(i, j))] = K
+    if not pairs:
+        raise CutoffError("no pair of granules is pressed at equilibrium: there is no precompressed chain")
+    nbrs: dict[int, list[int]] = {}
+    for i, j in pairs:
+        nbrs.setdefault(i, []).append(j)
+        nbrs.setdefault(j, []).append(i)
+    crowded = [g for g, ns in nbrs.items() if len(ns) > 2]
+    if crowded:
+        raise CutoffError(f"granule {labels[crowded[0]]} is pressed by {len(nbrs[crowded[0]])} neighbours: the loaded "
+                          "contacts form a packing, not a chain")
+    ends = [g for g, ns in nbrs.items() if len(ns) == 1]
+    if len(ends) != 2:
+        raise CutoffError("the loaded contacts close a loop: not a chain")
+    order = [min(ends, key=lambda g: labels[g])]
+    while len(order) < len(nbrs):
+        nxt = [g for g in nbrs[order[-1]] if g not in order[-2:]]
+        if not nxt:
+            break
+        order.append(nxt[0])
+    if len(order) != len(nbrs) or len(pairs) != len(order) - 1:
+        raise CutoffError("the loaded contacts form several chains; a cut-off needs one")
+    stray = [g for g in on_wall if g not in (order[0], order[-1])]
+    if stray:
+        raise CutoffError(f"granule {labels[stray[0]]} presses on a wall away from the chain's ends")
+    links = np.array([pairs[(min(a, b), max(a, b))] for a, b in zip(order[:-1], order[1:])])
+    return order, links, on_wall
+
+
+# the modal fit of a chain's free response: samples per period of the chain's highest possible
+# frequency, the most samples fitted, and the pencil's span in samples (16 periods of that
+# frequency: a pencil much shorter, such as a third of a short record, lets the weak harmonics of
+# Hertz's law pull the top mode by up to 1e-3)
+SAMPLES_PER_PERIOD = 16.0
+MAX_SAMPLES = 600
+PENCIL = 256
+
+
+def _top_mode(t, V, order: int, n: int):
+    """(damped_modes of V, the index of the top mode): the highest of the n strongest
+    oscillations that reach 1e-3 of the strongest (the harmonics and combination tones of Hertz's
+    law are weaker by about the strain)."""
+    modes = damped_modes(t, V, order, pencil=min(PENCIL, (2 * len(t)) // 3))
+    strong = np.zeros(len(modes.frequency), bool)
+    strong[np.argsort(modes.strength)[::-1][:n]] = True
+    strong &= modes.strength >= 1e-3 * modes.strength.max(initial=0.0)
+    if not strong.any():
+        raise CutoffError("no oscillation found in the chain's free response")
+    return modes, int(np.flatnonzero(strong)[-1])
+
+
+def _free_start(system, t_end: float) -> tuple[float, bool]:
+    """(When the run's loads and moving walls have all stopped, constant loads aside: the start
+    of the free response; whether any of them acts at all). CutoffError when one lasts to the
+    end of the run."""
+    start, driven = 0.0, False
+    for k, e in enumerate(system.excitations):
+        if e.history.kind == "constant":
+            continue
+        driven = True
+        end = e.history.end_time
+        if not end < t_end:
+            raise CutoffError(f"excitations.{k} ({e.history.kind}) acts until the end of the run: a cut-off is read from "
+                              "the free response after a pulse (give the drive a finite duration, or use a half_sine)")
+        start = max(start, end)
+    for w in system.walls:
+        if w.drive is not None:
+            driven = True
+            end = w.drive.t0 + w.drive.duration
+            if not end < t_end:
+                raise CutoffError(f"wall {w.name or '?'} moves until the end of the run: a cut-off is read from the free "
+                                  "response")
+            start = max(start, end)
+    return start, driven
+
+
+def cutoff_frequency(ds, system=None, min_periods: float = 10.0, max_strain: float = 0.1,
+                     rtol: float = 1e-3) -> ChainCutoff:
+    """The cut-off frequency of a precompressed monatomic chain, measured from a run in which a
+    pulse (or any transient load) sets it ringing: the frequency of the chain's highest normal
+    mode, found in the free response, over that mode's share of the cut-off for the chain's ends.
+
+    In a monatomic chain of beads of mass m linked by contacts of stiffness K (Hertz under a
+    preload F0: K = 3/2 A^(2/3) F0^(1/3)), a wave exp(i(n theta - w t)) has w = w_c sin(theta /
+    2), w_c = 2 sqrt(K / m): the pass band ends at f_c = (1/pi) sqrt(K / m), beyond which waves
+    are evanescent. A finite chain of n beads has n modes; the highest sits just below f_c, at
+    f_c cos(pi / (4n)) for a free end and a rigid wall of the chain's material at the other (a
+    sphere on such a wall under F0 has twice the pair stiffness, `chain_mode_factors`).
+
+    What is measured, and from what:
+    * the chain, its order and its ends from the run's equilibrium contacts (`equilibrium_*`:
+      each loaded contact's stiffness 3/2 F / delta, exact for Hertz's law); the pairs must be
+      equally stiff and the beads equally heavy (monatomic), and the ends' wall stiffness over
+      the pairs' sets the mode factor;
+    * the modes from the beads' velocities along the chain after the last transient load has
+      ended (`damped_modes`, 4n exponentials, every bead a channel), each mode's undamped
+      frequency |s| / 2 pi (for the chain's Tsuji damping, linearised, exactly the undamped
+      eigenfrequency: the dashpots are proportional to the springs);
+    * the top mode: the highest of the n strongest oscillations that reach 1e-3 of the
+      strongest (the order beyond 2n takes up the weak harmonics of Hertz's law, which would
+      otherwise pull the fitted modes by about the strain).
+
+    The fit checks itself: it is repeated on the first three quarters of the free response, and
+    a top mode that moves by more than `rtol` between the two (`spread`) is refused; so is one
+    above Gershgorin's bound of the linearised chain (no mode can be there: a fit the record
+    cannot support).
+
+    CutoffError (a ValueError) says why when the run does not allow it: no precompression
+    (`simulation.equilibrate` with a constant load), loaded contacts that are not one straight
+    monatomic chain, a drive that lasts to the end, outputs too sparse for the chain's highest
+    frequency (that bound, 2.5 samples a period), a free response with too few samples (8 per
+    exponential fitted) or shorter than `min_periods` periods of the top mode, a fit that fails
+    its checks, or contacts whose overlap swings by more than `max_strain` of its static value
+    (not the linear regime). `system` is the run's granular system
+    (`scenario.build.build_granular(sc, sc.base)[0]`), built from the run's scenario when not
+    given."""
+    if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
+        raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
+                          "a cut-off belongs to a precompressed chain")
+    if float(ds.attrs.get("equilibrium_max_solid_force_N", 0.0)) > 0:
+        raise CutoffError("the chain presses on the solid: only rigid walls may hold a chain whose cut-off is measured")
+    if system is None:
+        from .. import scenario as S
+        from ..scenario.build import build_granular
+
+        try:
+            sc = S.validate(tomllib.loads(ds.attrs["scenario"]))
+            system = build_granular(sc, sc.base)[0]
+        except (S.ScenarioError, OSError, KeyError) as e:
+            raise CutoffError(f"cannot rebuild the run's granular system from its scenario ({e}); pass it as system") from None
+    order, links, on_wall = _chain_contacts(ds, system)
+    labels = list(system.labels)
+    n = len(order)
+    mass = system.mass[order]
+    if np.ptp(mass) > 1e-9 * mass.max() or np.ptp(links) > 1e-6 * links.max():
+        raise CutoffError(f"the chain {labels[order[0]]}..{labels[order[-1]]} is not monatomic (bead masses "
+                          f"{mass.min():.4g}-{mass.max():.4g} kg, pair stiffnesses {links.min():.4g}-{links.max():.4g} "
+                          "N/m): its band edge is not a single f_c")
+    m, K = float(mass.mean()), float(links.mean())
+    k_ends = (float(on_wall.get(order[0], 0.0) / K), float(on_wall.get(order[-1], 0.0) / K))
+    t = np.asarray(ds["time"].values, float)
+    x0 = np.column_stack([ds["x"].values[0, order], ds["y"].values[0, order]])
+    axis = x0[-1] - x0[0]
+    axis /= np.hypot(*axis)
+    off = np.abs((x0 - x0[0]) @ np.array([-axis[1], axis[0]]))
+    if off.max() > 1e-3 * system.radius[order].min():
+        raise CutoffError(f"the chain is not straight ({labels[order[int(np.argmax(off))]]} lies {off.max():.3g} m off "
+                          "the line through its ends): the one-dimensional band does not apply")
+    # sampling: Gershgorin's bound on the linearised chain's frequencies
+    f_bound = math.sqrt(max(4.0, 2.0 + k_ends[0], 2.0 + k_ends[1]) * K / m) / (2 * math.pi)
+    dt = (t[-1] - t[0]) / max(len(t) - 1, 1)
+    if len(t) < 2 or 1.0 / dt < 2.5 * f_bound:
+        raise CutoffError(f"outputs every {dt:.3g} s sample the chain's modes (up to {f_bound:.4g} Hz) fewer than 2.5 times a "
+                          "period: lower simulation.output_every")
+    start, driven = _free_start(system, t[-1])
+    if not driven and not np.any(ds["v_x"].values[0, order]) and not np.any(ds["v_y"].values[0, order]):
+        raise CutoffError("nothing sets the chain moving (no transient load, moving wall or initial velocity)")
+    # the contacts' swing about their static overlap, over the record
+    i, j = np.array(order[:-1]), np.array(order[1:])
+    R = system.radius
+    gap = np.hypot(ds["x"].values[:, j] - ds["x"].values[:, i], ds["y"].values[:, j] - ds["y"].values[:, i])
+    delta = R[i] + R[j] - gap
+    strain = float(np.max(np.abs(delta - delta[0]) / delta[0]))
+    if strain > max_strain:
+        raise CutoffError(f"a contact's overlap swings by {strain:.3g} of its static value (limit {max_strain:g}): the chain "
+                          "is not in its linear regime; drive it more weakly")
+    # the free response, thinned to about 16 samples a period of the bound, at most 600 samples
+    # (37 periods of the bound, where the top mode sits: enough for the fit, and a cheap SVD)
+    sel = np.flatnonzero(t >= start + 0.5 * dt)
+    q = max(1, int(1.0 / (dt * SAMPLES_PER_PERIOD * f_bound)))
+    sel = sel[::q][:MAX_SAMPLES]
+    order_fit = 4 * n  # the n modes, and as many exponentials again for the contacts' weak harmonics
+    if len(sel) < 8 * order_fit:
+        raise CutoffError(f"the free response after {start:.3g} s holds {len(sel)} usable samples (at {1 / (q * dt):.4g} "
+                          f"Hz); {8 * order_fit} are needed for a chain of {n} beads: lengthen "
+                          "simulation.duration")
+    V = ds["v_x"].values[sel][:, order] * axis[0] + ds["v_y"].values[sel][:, order] * axis[1]
+    if not np.any(V):
+        raise CutoffError("the chain does not move after its loads end: nothing to measure")
+    modes, k = _top_mode(t[sel], V, order_fit, n)
+    f_top = float(modes.frequency[k])
+    if f_top > f_bound * (1.0 + 1e-3):
+        raise CutoffError(f"the modal fit finds an oscillation at {f_top:.4g} Hz, above any mode of the linearised chain "
+                          f"(at most {f_bound:.4g} Hz): the free response is too short or too noisy for it; lengthen "
+                          "simulation.duration")
+    span = float(t[sel[-1]] - t[sel[0]])
+    if span * f_top < min_periods:
+        raise CutoffError(f"the free response ({span:.3g} s) holds {span * f_top:.1f} periods of the top mode "
+                          f"({f_top:.4g} Hz); {min_periods:g} are needed: lengthen simulation.duration")
+    # the same fit on the first three quarters of the window: a fit the record supports agrees
+    part = sel[: (3 * len(sel)) // 4]
+    other, kk = _top_mode(t[part], V[: len(part)], order_fit, n)
+    spread = abs(float(other.frequency[kk]) / f_top - 1.0)
+    if not spread <= rtol:
+        raise CutoffError(f"the top mode ({f_top:.6g} Hz) moves by {spread:.2g} when the last quarter of the free response "
+                          f"is left out (limit {rtol:g}): the record is too short (or too nonlinear) for a reliable fit; "
+                          "lengthen simulation.duration")
+    factor = float(chain_mode_factors(n, *k_ends)[-1])
+    strong = np.zeros(len(modes.frequency), bool)
+    strong[np.argsort(modes.strength)[::-1][:n]] = True
+    strong &= modes.strength >= 1e-3 * modes.strength.max()
+    return ChainCutoff(cutoff_hz=f_top / factor, top_mode_hz=f_top, top_damping_ratio=float(modes.damping_ratio[k]),
+                       factor=factor, beads=tuple(labels[g] for g in order), end_stiffness=k_ends,
+                       modes_hz=modes.frequency[strong], window=(float(t[sel[0]]), float(t[sel[-1]])), strain=strain,
+                       spread=spread)
