@@ -82,10 +82,10 @@ def test_the_finite_chain_factors_are_the_closed_forms():
 
 def test_the_measured_cutoff_matches_the_linearised_chain():
     """One run of the study's base chain (R = 5 mm): every mode measured from the free response is
-    the linearised chain's eigenfrequency (numpy's eigvalsh) within 1e-4 (measured: 1e-6 to 5e-5),
-    the cut-off is (1/pi) sqrt(K/m) within 2e-4 (measured about 1e-5; 25 radii from 2 to 10 mm
-    stay within 1.5e-4), the ends are found free and twice as stiff as a pair, and the top mode's
-    damping ratio is the linearised Tsuji damping's: stiffness-proportional with
+    the linearised chain's eigenfrequency (numpy's eigvalsh) within 1e-4 (measured: 2e-7 to
+    4.4e-5), the cut-off is (1/pi) sqrt(K/m) within 2e-4 (measured -4.4e-5; 25 radii from 2 to
+    10 mm stay within 1.7e-4), the ends are found free and twice as stiff as a pair, and the top
+    mode's damping ratio is the linearised Tsuji damping's: stiffness-proportional with
     zeta = alpha_n / sqrt(3) sin(theta / 2) (2.87 %), within 2 %."""
     ds, system = chain_run(0.005)
     c = cutoff_frequency(ds, system)
@@ -224,17 +224,18 @@ def test_the_design_file_is_accepted_and_a_bad_tied_field_is_refused(tmp_path):
 
 @pytest.mark.slow
 def test_the_study_finds_the_radius_of_a_12_khz_cutoff(tmp_path):
-    """scenarios/designs/cutoff.toml as it stands: 60 TPE trials on 2 workers, each measuring the
-    cut-off from its own run, land within 1 % of the closed-form radius R* = 6.5883 mm (seeds 1-6
-    measured within 0.37 %, 21-32 s a study); every trial succeeds, and best.toml runs as it is
-    with its eight radii equal."""
+    """scenarios/designs/cutoff.toml as it stands: 60 TPE trials, each measuring the cut-off from
+    its own run, land within 1 % of the closed-form radius R* = 6.5883 mm; every trial succeeds,
+    and best.toml runs as it is with its eight radii equal. One worker, so that the study is
+    reproducible (seed 1: -0.08 %; seeds 1-6 within 0.52 %, 23-29 s a study; on 2 workers, whose
+    trials finish in varying order, seeds 1-6 land within 0.74 %)."""
     from granel.design import load_design, run_design
 
     r_star = radius_for(TARGET_HZ)
     assert r_star == pytest.approx(6.5883e-3, rel=1e-4)
     spec, base = load_design(DESIGN)
     assert spec.trials == 60 and spec.sampler == "tpe"
-    res = run_design(spec, base, tmp_path / "out", workers=2)
+    res = run_design(spec, base, tmp_path / "out", workers=1)
     ds = res["trials"]
     assert ds.sizes["trial"] == 60 and (ds["status"].values == "ok").all()
     best = res["best"][0].params["media.0.radii.0"]
