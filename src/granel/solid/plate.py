@@ -178,7 +178,7 @@ class PlateMesh:
     rigid_layers: bool = True
 
 
-PLATE_CACHE_VERSION = 1  # raise when the assembly below changes what it produces
+PLATE_CACHE_VERSION = 2  # raise when the assembly below changes what it produces
 
 
 def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
@@ -186,33 +186,48 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
     """The reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one per
     layer). The assembled matrices are cached on disk by the arguments: a run then needs no
     scikit-fem (its import alone takes about 0.5 s); the element-level quantities of figures and
-    movies (`element_energies`, `basis`) assemble the plate again on first use."""
+    movies (`element_energies`, `basis`) assemble the plate again on first use. A plate that
+    differs from a cached one only in thickness, Young's modulus and density is that plate
+    scaled (K by E h, M by rho h, the element volumes by h; `_scaled_plate`)."""
     args = (x0, y0, width, length, thickness, E, nu, rho, tuple(layers), mesh, tuple(clamped))
     path = _plate_cache_path(args)
     model = _load_plate(path, args)
     if model is None:
-        model = assemble_plate(*args)
-        _save_plate(path, model)
+        model = _scaled_plate(path, args)
+        if model is None:
+            model = assemble_plate(*args)
+        _save_plate(path, model, args)
     return model
 
 
+def _scale_free_args(args) -> tuple:
+    """What the plate's K / (E h) and M / (rho h) depend on: every argument but the thickness,
+    Young's modulus and density (Poisson's ratio stays: D / E depends on it)."""
+    x0, y0, width, length, thickness, E, nu, rho, layers, mesh, clamped = args
+    return (PLATE_CACHE_VERSION, x0, y0, width, length, nu, layers, mesh, clamped)
+
+
 def _plate_cache_path(args):
+    """plate-FAMILY-KEY.npz: KEY by all the arguments, FAMILY by the scale-free ones."""
     import hashlib
 
     from .modal import cache_dir
 
     key = hashlib.sha256(repr((PLATE_CACHE_VERSION, args)).encode()).hexdigest()[:24]
-    return cache_dir() / f"plate-{key}.npz"
+    family = hashlib.sha256(repr(_scale_free_args(args)).encode()).hexdigest()[:12]
+    return cache_dir() / f"plate-{family}-{key}.npz"
 
 
-def _save_plate(path, model: SolidModel) -> None:
+def _save_plate(path, model: SolidModel, args) -> None:
     """The assembled arrays of a plate model (atomically; a cache that cannot be written is skipped)."""
     import json
     import os
 
+    thickness, E, rho = args[4], args[5], args[7]
     arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
               "volume": model.element_volume, "node_dofs": model.node_dofs,
-              "contacts": np.array(json.dumps([c.__dict__ for c in model.contacts]))}
+              "contacts": np.array(json.dumps([c.__dict__ for c in model.contacts])),
+              "family": np.array(repr(_scale_free_args(args))), "scales": np.array([thickness, E, rho], float)}
     for name, A in (("M", model.M), ("K", model.K), ("T", model.T)):
         A = A.tocsr()
         arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr,
@@ -233,8 +248,24 @@ def _save_plate(path, model: SolidModel) -> None:
             tmp.unlink()
 
 
-def _load_plate(path, args) -> SolidModel | None:
-    """The cached plate of these arguments, or None (missing or unreadable cache)."""
+def _scaled_plate(path, args) -> SolidModel | None:
+    """The plate of `args` from a cached plate of the same family (`_scale_free_args`) at another
+    thickness h0, modulus E0 and density rho0: K (E h) / (E0 h0), M (rho h) / (rho0 h0), element
+    volumes h / h0; nothing else of the assembly depends on them. None without such a plate."""
+    thickness, E, rho = args[4], args[5], args[7]
+    family = path.name.split("-")[1]
+    for other in sorted(path.parent.glob(f"plate-{family}-*.npz")):
+        if other == path:
+            continue
+        model = _load_plate(other, args, scales=(thickness, E, rho))
+        if model is not None:
+            return model
+    return None
+
+
+def _load_plate(path, args, scales=None) -> SolidModel | None:
+    """The cached plate of these arguments, or None (missing or unreadable cache). `scales`
+    (thickness, E, rho): the plate at `path` is one of the same family, scaled to these."""
     import json
 
     if not path.exists():
@@ -247,6 +278,15 @@ def _load_plate(path, args) -> SolidModel | None:
             contacts = [ContactPoint(**{**c, "position": tuple(c["position"]), "normal": tuple(c["normal"])})
                         for c in json.loads(str(z["contacts"]))]
             nodes, elements, volume, node_dofs = z["nodes"], z["elements"], z["volume"], z["node_dofs"]
+            if scales is not None:
+                if str(z["family"]) != repr(_scale_free_args(args)):
+                    return None
+                (h0, E0, rho0), (h, E, rho) = z["scales"], scales
+                if not (h0 > 0 and E0 > 0 and rho0 > 0):
+                    return None
+                mats["K"] = mats["K"] * ((E * h) / (E0 * h0))
+                mats["M"] = mats["M"] * ((rho * h) / (rho0 * h0))
+                volume = volume * (h / h0)
     except (OSError, ValueError, KeyError):
         return None
     from .modal import _touch
