@@ -63,3 +63,14 @@ def test_split_modes_equal_the_whole_solve():
 def test_no_split_without_symmetry():
     assert mirror_operator(plate(SYMMETRIC[:-1])) is None  # one layer without its image
     assert mirror_operator(build_beam(0, 0, 0.01, 0.1, 0.001, 200e9, 7850, [("c", "left", 0.05)], 20)) is None
+
+
+def test_modal_analysis_uses_the_split():
+    from granel.solid.modal import modal_analysis
+
+    m = plate(SYMMETRIC)
+    modes = modal_analysis(m)
+    w2, _ = sl.eigh(m.K.toarray(), m.M.toarray())
+    assert np.abs(modes.omega[3:] ** 2 / w2[3:] - 1).max() < 1e-10
+    few = modal_analysis(m, m.ndof // 2)
+    assert few.omega == pytest.approx(modes.omega[: m.ndof // 2], rel=1e-12)
