@@ -86,6 +86,16 @@ def _quiet():
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
 
 
+def _save(fig, path: Path) -> Path:
+    """A finished figure to `path` (PNG at 130 dpi), closed."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path
+
+
 def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
     """history.png (every objective), pareto.png (several objectives), importances.png (two or
     more variables and enough finished trials), by Optuna's matplotlib visualisation."""
@@ -105,11 +115,7 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
     def save(ax, name):
         fig = (ax[0] if isinstance(ax, np.ndarray) else ax).figure
         fig.set_size_inches(7, 4.5)
-        fig.tight_layout()
-        path = out / name
-        fig.savefig(path, dpi=130)
-        plt.close(fig)
-        files.append(path)
+        files.append(_save(fig, out / name))
 
     for k, o in enumerate(spec.objectives):
         target = None if len(spec.objectives) == 1 else (lambda t, k=k: t.values[k])
@@ -191,11 +197,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
                    title="energy held (tighter accuracy)" + (", first frequency" if spec.mode == "spectrum" else ""))
     for ax in axes[1]:
         ax.legend(fontsize=6)
-    fig.tight_layout()
-    path = out / "best.png"
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "best.png")
 
 
 # ---------------------------------------------------------------- the solid's modes
@@ -291,11 +293,7 @@ def modes_figure(found: list[tuple[str, str, dict]], out: Path) -> Path | None:
         ax.set(xscale="log", yscale="log", ylim=(1e-5, 1.5), xlabel="mode frequency [kHz]",
                ylabel="share of the time-integrated solid energy", title=run)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = out / "modes.png"
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return _save(fig, out / "modes.png")
 
 
 def modal_lines(found: list[tuple[str, str, dict]]) -> list[str]:
