@@ -269,7 +269,7 @@ def _free_start(system, t_end: float) -> tuple[float, bool]:
     return start, driven
 
 
-def cutoff_frequency(ds, system=None, min_periods: float = 10.0, max_strain: float = 0.1,
+def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 0.1,
                      rtol: float = 1e-3) -> ChainCutoff:
     """The cut-off frequency of a precompressed monatomic chain, measured from a run in which a
     pulse (or any transient load) sets it ringing: the frequency of the chain's highest normal
@@ -307,84 +307,38 @@ def cutoff_frequency(ds, system=None, min_periods: float = 10.0, max_strain: flo
     exponential fitted) or shorter than `min_periods` periods of the top mode, a fit that fails
     its checks, or contacts whose overlap swings by more than `max_strain` of its static value
     (not the linear regime). `system` is the run's granular system
-    (`scenario.build.build_granular(sc, sc.base)[0]`), built from the run's scenario when not
-    given."""
+    (`scenario.build.build_granular(sc, sc.base)[0]`)."""
     if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
         raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
                           "a cut-off belongs to a precompressed chain")
     if float(ds.attrs.get("equilibrium_max_solid_force_N", 0.0)) > 0:
         raise CutoffError("the chain presses on the solid: only rigid walls may hold a chain whose cut-off is measured")
-    if system is None:
-        from .. import scenario as S
-        from ..scenario.build import build_granular
-
-        try:
-            sc = S.validate(tomllib.loads(ds.attrs["scenario"]))
-            system = build_granular(sc, sc.base)[0]
-        except (S.ScenarioError, OSError, KeyError) as e:
-            raise CutoffError(f"cannot rebuild the run's granular system from its scenario ({e}); pass it as system") from None
-    order, links, on_wall = _chain_contacts(ds, system)
-    labels = list(system.labels)
+    order, m, K, k_ends, axis = _monatomic_chain(ds, system)
     n = len(order)
-    mass = system.mass[order]
-    if np.ptp(mass) > 1e-9 * mass.max() or np.ptp(links) > 1e-6 * links.max():
-        raise CutoffError(f"the chain {labels[order[0]]}..{labels[order[-1]]} is not monatomic (bead masses "
-                          f"{mass.min():.4g}-{mass.max():.4g} kg, pair stiffnesses {links.min():.4g}-{links.max():.4g} "
-                          "N/m): its band edge is not a single f_c")
-    m, K = float(mass.mean()), float(links.mean())
-    k_ends = (float(on_wall.get(order[0], 0.0) / K), float(on_wall.get(order[-1], 0.0) / K))
+    labels = list(system.labels)
     t = np.asarray(ds["time"].values, float)
-    x0 = np.column_stack([ds["x"].values[0, order], ds["y"].values[0, order]])
-    axis = x0[-1] - x0[0]
-    axis /= np.hypot(*axis)
-    off = np.abs((x0 - x0[0]) @ np.array([-axis[1], axis[0]]))
-    if off.max() > 1e-3 * system.radius[order].min():
-        raise CutoffError(f"the chain is not straight ({labels[order[int(np.argmax(off))]]} lies {off.max():.3g} m off "
-                          "the line through its ends): the one-dimensional band does not apply")
     # sampling: Gershgorin's bound on the linearised chain's frequencies
     f_bound = math.sqrt(max(4.0, 2.0 + k_ends[0], 2.0 + k_ends[1]) * K / m) / (2 * math.pi)
-    dt = (t[-1] - t[0]) / max(len(t) - 1, 1)
-    if len(t) < 2 or 1.0 / dt < 2.5 * f_bound:
-        raise CutoffError(f"outputs every {dt:.3g} s sample the chain's modes (up to {f_bound:.4g} Hz) fewer than 2.5 times a "
-                          "period: lower simulation.output_every")
-    start, driven = _free_start(system, t[-1])
-    if not driven and not np.any(ds["v_x"].values[0, order]) and not np.any(ds["v_y"].values[0, order]):
-        raise CutoffError("nothing sets the chain moving (no transient load, moving wall or initial velocity)")
-    # the contacts' swing about their static overlap, over the record
-    i, j = np.array(order[:-1]), np.array(order[1:])
-    R = system.radius
-    gap = np.hypot(ds["x"].values[:, j] - ds["x"].values[:, i], ds["y"].values[:, j] - ds["y"].values[:, i])
-    delta = R[i] + R[j] - gap
-    strain = float(np.max(np.abs(delta - delta[0]) / delta[0]))
-    if strain > max_strain:
-        raise CutoffError(f"a contact's overlap swings by {strain:.3g} of its static value (limit {max_strain:g}): the chain "
-                          "is not in its linear regime; drive it more weakly")
-    # the free response, thinned to about 16 samples a period of the bound, at most 600 samples
-    # (37 periods of the bound, where the top mode sits: enough for the fit, and a cheap SVD)
-    sel = np.flatnonzero(t >= start + 0.5 * dt)
-    q = max(1, int(1.0 / (dt * SAMPLES_PER_PERIOD * f_bound)))
-    sel = sel[::q][:MAX_SAMPLES]
+    t_sel, V, strain = _free_response(ds, system, order, axis, f_bound, max_strain)
     order_fit = 4 * n  # the n modes, and as many exponentials again for the contacts' weak harmonics
-    if len(sel) < 8 * order_fit:
-        raise CutoffError(f"the free response after {start:.3g} s holds {len(sel)} usable samples (at {1 / (q * dt):.4g} "
-                          f"Hz); {8 * order_fit} are needed for a chain of {n} beads: lengthen "
-                          "simulation.duration")
-    V = ds["v_x"].values[sel][:, order] * axis[0] + ds["v_y"].values[sel][:, order] * axis[1]
+    if len(t_sel) < 8 * order_fit:
+        raise CutoffError(f"the free response after {t_sel[0] if len(t_sel) else t[-1]:.3g} s holds {len(t_sel)} usable "
+                          f"samples; {8 * order_fit} are needed for a chain of {n} beads: lengthen simulation.duration")
     if not np.any(V):
         raise CutoffError("the chain does not move after its loads end: nothing to measure")
-    modes, k = _top_mode(t[sel], V, order_fit, n)
+    modes, k = _top_mode(t_sel, V, order_fit, n)
     f_top = float(modes.frequency[k])
     if f_top > f_bound * (1.0 + 1e-3):
         raise CutoffError(f"the modal fit finds an oscillation at {f_top:.4g} Hz, above any mode of the linearised chain "
                           f"(at most {f_bound:.4g} Hz): the free response is too short or too noisy for it; lengthen "
                           "simulation.duration")
-    span = float(t[sel[-1]] - t[sel[0]])
+    span = float(t_sel[-1] - t_sel[0])
     if span * f_top < min_periods:
         raise CutoffError(f"the free response ({span:.3g} s) holds {span * f_top:.1f} periods of the top mode "
                           f"({f_top:.4g} Hz); {min_periods:g} are needed: lengthen simulation.duration")
     # the same fit on the first three quarters of the window: a fit the record supports agrees
-    part = sel[: (3 * len(sel)) // 4]
-    other, kk = _top_mode(t[part], V[: len(part)], order_fit, n)
+    part = (3 * len(t_sel)) // 4
+    other, kk = _top_mode(t_sel[:part], V[:part], order_fit, n)
     spread = abs(float(other.frequency[kk]) / f_top - 1.0)
     if not spread <= rtol:
         raise CutoffError(f"the top mode ({f_top:.6g} Hz) moves by {spread:.2g} when the last quarter of the free response "
@@ -396,5 +350,56 @@ def cutoff_frequency(ds, system=None, min_periods: float = 10.0, max_strain: flo
     strong &= modes.strength >= 1e-3 * modes.strength.max()
     return ChainCutoff(cutoff_hz=f_top / factor, top_mode_hz=f_top, top_damping_ratio=float(modes.damping_ratio[k]),
                        factor=factor, beads=tuple(labels[g] for g in order), end_stiffness=k_ends,
-                       modes_hz=modes.frequency[strong], window=(float(t[sel[0]]), float(t[sel[-1]])), strain=strain,
+                       modes_hz=modes.frequency[strong], window=(float(t_sel[0]), float(t_sel[-1])), strain=strain,
                        spread=spread)
+
+
+def _monatomic_chain(ds, system):
+    """(order, bead mass, pair stiffness, end stiffnesses over it, the chain's unit axis) of the
+    run's precompressed chain, or CutoffError if it is not one straight monatomic chain."""
+    order, links, on_wall = _chain_contacts(ds, system)
+    labels = list(system.labels)
+    mass = system.mass[order]
+    if np.ptp(mass) > 1e-9 * mass.max() or np.ptp(links) > 1e-6 * links.max():
+        raise CutoffError(f"the chain {labels[order[0]]}..{labels[order[-1]]} is not monatomic (bead masses "
+                          f"{mass.min():.4g}-{mass.max():.4g} kg, pair stiffnesses {links.min():.4g}-{links.max():.4g} "
+                          "N/m): its band edge is not a single f_c")
+    m, K = float(mass.mean()), float(links.mean())
+    k_ends = (float(on_wall.get(order[0], 0.0) / K), float(on_wall.get(order[-1], 0.0) / K))
+    x0 = np.column_stack([ds["x"].values[0, order], ds["y"].values[0, order]])
+    axis = x0[-1] - x0[0]
+    axis /= np.hypot(*axis)
+    off = np.abs((x0 - x0[0]) @ np.array([-axis[1], axis[0]]))
+    if off.max() > 1e-3 * system.radius[order].min():
+        raise CutoffError(f"the chain is not straight ({labels[order[int(np.argmax(off))]]} lies {off.max():.3g} m off "
+                          "the line through its ends): the one-dimensional band does not apply")
+    return order, m, K, k_ends, axis
+
+
+def _free_response(ds, system, order, axis, f_bound: float, max_strain: float):
+    """(times, the beads' velocities along the chain (times, beads), the contacts' largest swing
+    over their static overlap) of the chain's free response: after the last transient load,
+    thinned to about SAMPLES_PER_PERIOD samples a period of f_bound, at most MAX_SAMPLES. CutoffError
+    for outputs too sparse for f_bound, nothing that sets the chain moving, or a swing beyond
+    max_strain (not the linear regime)."""
+    t = np.asarray(ds["time"].values, float)
+    dt = (t[-1] - t[0]) / max(len(t) - 1, 1)
+    if len(t) < 2 or 1.0 / dt < 2.5 * f_bound:
+        raise CutoffError(f"outputs every {dt:.3g} s sample the chain's modes (up to {f_bound:.4g} Hz) fewer than 2.5 times a "
+                          "period: lower simulation.output_every")
+    start, driven = _free_start(system, t[-1])
+    if not driven and not np.any(ds["v_x"].values[0, order]) and not np.any(ds["v_y"].values[0, order]):
+        raise CutoffError("nothing sets the chain moving (no transient load, moving wall or initial velocity)")
+    i, j = np.array(order[:-1]), np.array(order[1:])
+    R = system.radius
+    gap = np.hypot(ds["x"].values[:, j] - ds["x"].values[:, i], ds["y"].values[:, j] - ds["y"].values[:, i])
+    delta = R[i] + R[j] - gap
+    strain = float(np.max(np.abs(delta - delta[0]) / delta[0]))
+    if strain > max_strain:
+        raise CutoffError(f"a contact's overlap swings by {strain:.3g} of its static value (limit {max_strain:g}): the chain "
+                          "is not in its linear regime; drive it more weakly")
+    sel = np.flatnonzero(t >= start + 0.5 * dt)
+    q = max(1, int(1.0 / (dt * SAMPLES_PER_PERIOD * f_bound)))
+    sel = sel[::q][:MAX_SAMPLES]
+    V = ds["v_x"].values[sel][:, order] * axis[0] + ds["v_y"].values[sel][:, order] * axis[1]
+    return t[sel], V, strain
