@@ -9,7 +9,7 @@ from granel.solid.beam import build_beam
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate
 from granel.solid.symmetry import mirror_operator, split_eigh, symmetric_bases
 
-MESH = PlateMesh(3, 2.0, 5e-3)
+MESH = PlateMesh(2, 2.5, 8e-3)  # a coarse plate: a few hundred DOFs
 
 
 def plate(layers):
