@@ -237,7 +237,32 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wante
     of a proportional solid (`scaled_modes`), or `compute()` and store them (atomically; without
     a writable cache they are simply recomputed next time). `wanted` = (w_cut [rad/s], most
     modes): what `compute` returns, the lowest modes up to w_cut, at most that many (None: no
-    bound); all modes by default. Each stored set gets a scale-free record (`_write_record`)."""
+    bound); all modes by default. Each stored set gets a scale-free record (`_write_record`).
+    Only one process computes a given set at a time (`_acquire`): the others wait for it."""
+    stem = _stem(model, prefix, key)
+    free = _scale_free(model)
+    lock = stem.with_suffix(".lock")
+    while True:
+        modes = _from_cache(model, stem, free, wanted, mmap)
+        if modes is None and free is not None:
+            modes = scaled_modes(model, prefix, free, wanted, mmap)
+        if modes is not None:
+            return modes
+        held = _acquire(lock)
+        if held is False:  # another process is computing these modes: wait for them
+            _wait_for(lock)
+            continue
+        try:
+            modes = compute()
+            _store(model, stem, free, wanted, modes)
+        finally:
+            if held:
+                _release(lock)
+        return modes
+
+
+def _stem(model: SolidModel, prefix: str, key: str) -> Path:
+    """The cache entry's path without suffix: a hash of M, K and `key`."""
     import hashlib
 
     h = hashlib.sha256(key.encode())
@@ -246,29 +271,35 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wante
         A.sort_indices()
         for arr in (A.indptr, A.indices, A.data):
             h.update(np.ascontiguousarray(arr).tobytes())
-    stem = cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
+    return cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
+
+
+def _from_cache(model: SolidModel, stem: Path, free, wanted, mmap: bool) -> Modes | None:
+    """The solid's own modes from the cache files at `stem`, or None (absent or damaged)."""
     omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
-    free = _scale_free(model)
-    if omega_path.exists() and shapes_path.exists():
-        try:
-            omega = np.load(omega_path)
-            shapes = np.load(shapes_path, mmap_mode="r" if mmap else None)
-            if shapes.shape == (model.ndof, len(omega)):
-                _touch(omega_path, shapes_path)  # recently used: pruned last
-                if free is not None:
-                    record = _record_path(stem)
-                    if record.exists():
-                        _touch(record)
-                    else:  # a set cached before the records: it becomes a base too
-                        _write_record(stem, free, omega, model.ndof, wanted)
-                return Modes(omega, shapes, "cache")
-        except (OSError, ValueError):
-            pass  # a damaged cache file is recomputed and replaced
-    if free is not None:
-        modes = scaled_modes(model, prefix, free, wanted, mmap)
-        if modes is not None:
-            return modes
-    modes = compute()
+    if not (omega_path.exists() and shapes_path.exists()):
+        return None
+    try:
+        omega = np.load(omega_path)
+        shapes = np.load(shapes_path, mmap_mode="r" if mmap else None)
+        if shapes.shape != (model.ndof, len(omega)):
+            return None
+        _touch(omega_path, shapes_path)  # recently used: pruned last
+        if free is not None:
+            record = _record_path(stem)
+            if record.exists():
+                _touch(record)
+            else:  # a set cached before the records: it becomes a base too
+                _write_record(stem, free, omega, model.ndof, wanted)
+        return Modes(omega, shapes, "cache")
+    except (OSError, ValueError):
+        return None  # a damaged cache file is recomputed and replaced
+
+
+def _store(model: SolidModel, stem: Path, free, wanted, modes: Modes) -> None:
+    """Computed modes into the cache (atomically), with their scale-free record; nothing if the
+    cache is not writable."""
+    omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
     try:
         stem.parent.mkdir(parents=True, exist_ok=True)
         _save_atomic(shapes_path, modes.shapes)
@@ -279,7 +310,83 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wante
         prune_cache(keep=kept)
     except OSError:
         pass
-    return modes
+
+
+# ---------------------------------------------------------------- one computation at a time
+#
+# Workers of a sweep or a design study that meet the same new solid at once would each solve it
+# (a plate's modes take seconds of both cores): the first takes a lock file beside the cache
+# entry, and the others wait for its modes. A lock whose holder has died (its process gone on
+# this host, or the lock older than LOCK_STALE_S) is taken over, so a killed run leaves nobody
+# waiting.
+
+LOCK_STALE_S = 1800.0
+LOCK_POLL_S = 0.25
+
+
+def _acquire(lock: Path) -> bool | None:
+    """True: this process holds `lock`; False: a live holder has it; None: no lock can be taken
+    (an unwritable cache), and the caller computes without one."""
+    import os
+    import socket
+
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        if _stale(lock):
+            _release(lock)
+            return _acquire(lock)
+        return False
+    except OSError:
+        return None
+    with os.fdopen(fd, "w") as fh:
+        fh.write(f"{socket.gethostname()} {os.getpid()}\n")
+    return True
+
+
+def _stale(lock: Path) -> bool:
+    """The lock's holder is gone: its process no longer runs on this host, or the lock is older
+    than LOCK_STALE_S (a holder on another host of a shared cache)."""
+    import os
+    import socket
+    import time
+
+    try:
+        age = time.time() - lock.stat().st_mtime
+        text = lock.read_text()
+    except OSError:
+        return False  # just released: look again
+    try:
+        host, pid = text.split()
+    except ValueError:
+        return age > 10.0  # being written, or left empty by a holder killed as it wrote
+    if age > LOCK_STALE_S:
+        return True
+    if host != socket.gethostname():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, ValueError):
+        return False
+    return False
+
+
+def _wait_for(lock: Path) -> None:
+    """Until `lock` is released or stale."""
+    import time
+
+    while lock.exists() and not _stale(lock):
+        time.sleep(LOCK_POLL_S)
+
+
+def _release(lock: Path) -> None:
+    try:
+        lock.unlink()
+    except OSError:
+        pass
 
 
 # ---------------------------------------------------------------- modes of a proportional solid
