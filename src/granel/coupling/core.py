@@ -26,7 +26,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from ..jit import njit
 
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_eigenvalue, friction_map_slope

@@ -44,7 +44,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from ..jit import njit
 
 from ..granular.bundles import ACC_WORK, InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope, tanh_friction
