@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg as sl
 import scipy.sparse as sp
-from scipy.sparse.linalg import eigsh
 
 from .base import SolidModel
 
@@ -51,6 +50,8 @@ def modal_analysis(model: SolidModel, count: int | None = None) -> Modes:
         count = n
     if count is not None and count < min(200, n // 4):
         # a few low modes: shift-invert Lanczos is far cheaper than the dense solver
+        from scipy.sparse.linalg import eigsh
+
         w2, phi = eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")
         order = np.argsort(w2)
         w2, phi = w2[order], phi[:, order]
@@ -72,6 +73,8 @@ def modal_analysis(model: SolidModel, count: int | None = None) -> Modes:
     else:
         if count is None:
             raise ValueError(f"{n} DOFs: give a mode count (dense solution above {DENSE_LIMIT} DOFs is not attempted)")
+        from scipy.sparse.linalg import eigsh
+
         w2, phi = eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")
         order = np.argsort(w2)
         w2, phi = w2[order], phi[:, order]
