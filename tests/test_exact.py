@@ -225,3 +225,20 @@ def test_fixed_steps_run_past_the_ledger_bound():
     assert ds.attrs["solver_steps"] == 100
     w = ds["input_work"].values.max()
     assert 1e-15 * w < np.abs(ds["balance_error"].values).max() < 1e-6 * w
+
+
+@pytest.mark.parametrize("K", [1, 2, 3, 4])
+def test_modal_products_match_numpy(K):
+    """The step's two products between contacts and modes (`exact.contacts_of_modes`, P V', and
+    `exact.modes_of_contacts`, X P, written out instead of BLAS calls) agree with numpy to
+    round-off, for any number of rows and with zero rows in X."""
+    from granel.coupling.exact import contacts_of_modes, modes_of_contacts
+
+    rng = np.random.default_rng(K)
+    P, V, X = rng.normal(size=(20, 977)), rng.normal(size=(K, 977)), rng.normal(size=(K, 20))
+    X[0, 3:7] = 0.0
+    out, back = np.empty((20, K)), np.empty((K, 977))
+    contacts_of_modes(P, V, out)
+    modes_of_contacts(X, P, back)
+    assert np.abs(out - P @ V.T).max() < 1e-12 * np.abs(P @ V.T).max()
+    assert np.abs(back - X @ P).max() < 1e-12 * np.abs(X @ P).max()

@@ -190,7 +190,8 @@ class Work(NamedTuple):
     r: np.ndarray
     iface0: InterfaceForces  # at the first unknown node ...
     iface1: InterfaceForces  # ... and at the second (quadratic model)
-    ww: np.ndarray  # (nr, 2 nn) modal scratch
+    ww: np.ndarray  # (2 nn, nr) modal scratch
+    cw: np.ndarray  # (2nc, 2 nn) its values at the contacts
     rate: np.ndarray  # (1,): the friction rate of the step's RK4 sub-steps
     parts: np.ndarray  # (3,): the last step's scaled velocity error and energy-ledger parts (`step_error`)
     qdat: np.ndarray  # (nb, nr): the modal force data of the trial step (P'F0, P'X)
@@ -232,9 +233,9 @@ def work_for(y, nc, nr, nb):
     v = lambda k: np.zeros(k)  # noqa: E731
     return Work(np.empty_like(y), np.empty((5, y.shape[0])), np.empty_like(y), np.zeros_like(y), np.empty_like(y),
                 motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), v(n), v(n),
-                v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((nr, 2 * nn)), v(1), v(3), np.zeros((nb, nr)),
-                v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_), np.zeros(n, np.int64),
-                np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
+                v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((2 * nn, nr)), np.zeros((m2, 2 * nn)),
+                v(1), v(3), np.zeros((nb, nr)), v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_),
+                np.zeros(n, np.int64), np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
                 np.zeros((n, n)), v(n),
                 np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), v(2 * nn), v(nn), v(nn), v(nn),
                 v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)), v(2))
@@ -284,6 +285,51 @@ def ensure_ops(cache, solid, slot, h):
     cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
 
 
+@njit(cache=True, fastmath={"reassoc", "nsz", "contract"})
+def contacts_of_modes(P, V, out):
+    """out[r, k] = sum_i P[r, i] V[k, i]: modal vectors V (K, nr) seen at the contacts. The sums
+    are reassociated (vectorised; their rounding differs from a BLAS product's at 1e-16), and
+    the rows of V are taken two at a time with P's row read once per pair: on the paper's plate
+    (20 x 988, K = 4) 2.6 us against 7.8 us for np.dot."""
+    m2, nr = P.shape
+    K = V.shape[0]
+    for r in range(m2):
+        k = 0
+        while k + 1 < K:
+            a0 = 0.0
+            a1 = 0.0
+            for i in range(nr):
+                p = P[r, i]
+                a0 += p * V[k, i]
+                a1 += p * V[k + 1, i]
+            out[r, k] = a0
+            out[r, k + 1] = a1
+            k += 2
+        if k < K:
+            a0 = 0.0
+            for i in range(nr):
+                a0 += P[r, i] * V[k, i]
+            out[r, k] = a0
+
+
+@njit(cache=True)
+def modes_of_contacts(X, P, out):
+    """out[a, i] = sum_r X[a, r] P[r, i]: contact vectors X (A, 2nc) projected on the modes (P'
+    applied to each row), accumulated along P's rows (2.5 us against 7.6 us for np.dot with
+    A = 2 on the paper's plate)."""
+    A, m2 = X.shape
+    nr = P.shape[1]
+    for a in range(A):
+        for i in range(nr):
+            out[a, i] = 0.0
+        for r in range(m2):
+            x = X[a, r]
+            if x == 0.0:
+                continue
+            for i in range(nr):
+                out[a, i] += x * P[r, i]
+
+
 @njit(cache=True)
 def free_response(st, solid, cache, slot, w):
     """The part of the contacts' displacement and velocity at each unknown node that does not
@@ -300,9 +346,10 @@ def free_response(st, solid, cache, slot, w):
     for j in range(nn):
         hom = cache.hom[slot, j]
         for i in range(nr):
-            ww[i, 2 * j] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
-            ww[i, 2 * j + 1] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
-    out = np.dot(solid.P, ww)
+            ww[2 * j, i] = hom[i, 0] * st.eta[i] + hom[i, 1] * st.etad[i]
+            ww[2 * j + 1, i] = hom[i, 2] * st.eta[i] + hom[i, 0] * st.etad[i]
+    out = w.cw
+    contacts_of_modes(solid.P, ww, out)
     for j in range(nn):
         Cu, Cw = cache.Cu[slot, j, 0], cache.Cw[slot, j, 0]
         for r in range(m2):
@@ -779,7 +826,7 @@ def trial_ledger(st, solid, cache, slot, model, w):
     nn = cache.nodes.shape[0] - 1
     if nr > 0:
         w.qdat[0, :] = st.q
-        w.qdat[1:, :] = np.dot(w.X.reshape(nn, m2), solid.P)
+        modes_of_contacts(w.X.reshape(nn, m2), solid.P, w.qdat[1:])
     hom = cache.hom[slot, nn - 1]
     wd, wv = cache.wd[slot], cache.wv[slot]
     es = 0.0
