@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg as sl
 import scipy.sparse as sp
 
 from .base import SolidModel
@@ -66,6 +65,8 @@ def modal_analysis(model: SolidModel, count: int | None = None) -> Modes:
             if count is not None:
                 w2, phi = w2[:count], np.ascontiguousarray(phi[:, :count])
         else:
+            import scipy.linalg as sl
+
             K = model.K.toarray()
             M = model.M.toarray()
             sub = None if count is None else [0, count - 1]
