@@ -44,12 +44,12 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from ..jit import njit
 
 from ..granular.bundles import ACC_WORK, InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_map_slope, tanh_friction
 from ..granular.kernels import (friction_rate, granule_energies, interface_forces, load_value, motion_at, moved_beyond,
                                 overlaps, rhs, rk4_step, rk4_substepped, wall_forces)
+from ..jit import njit
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 
@@ -235,8 +235,8 @@ def work_for(y, nc, nr, nb):
                 motion_buffers(nc), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), np.zeros((nn, m2)), v(n), v(n),
                 v(n), v(n), interface_buffers(nc), interface_buffers(nc), np.zeros((2 * nn, nr)), np.zeros((m2, 2 * nn)),
                 v(1), v(3), np.zeros((nb, nr)), v(nr), v(nr), v(nc), v(nc), np.zeros((n, n)), v(n), np.zeros(nc, np.bool_),
-                np.zeros(n, np.int64), np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64),
-                np.zeros((n, n)), v(n),
+                np.zeros(n, np.int64), np.zeros(1, np.int64), np.array([-1, 99, 0], np.int64), np.zeros(n, np.int64),
+                np.zeros(n, np.int64), np.zeros((n, n)), v(n),
                 np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, 2 * nn)), np.zeros((2 * nn, n)), v(2 * nn), v(nn), v(nn), v(nn),
                 v(nn), np.zeros((nn, nn)), v(2), np.zeros((2, 2)), v(2))
 

@@ -485,8 +485,8 @@ def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = Fa
     with Phi_r = Psi Z; shapes that vanish (a beam's tangential DOFs) are left out.
 
     `partial`: `shapes` holds only the modes below the cut-off (every one of them is kept), and
-    K^-1 B' comes from a sparse factorisation. Otherwise the basis is complete and `dropped` =
-    (P_d, omega_d), the dropped modes at the contacts, is enough: Psi = Phi_d W_d^-2 P_d', so
+    K^-1 B' comes from a sparse factorisation. Otherwise the basis is complete and `at_contacts`
+    = (P, P_d, omega_d), the retained and dropped modes at the contacts, is enough: Psi = Phi_d W_d^-2 P_d', so
     R = P_d W_d^-2 P_d' and Psi' M Psi = P_d W_d^-4 P_d' (mass-normalised modes), with no
     factorisation and no read of the shapes; Psi is then returned as None (nothing needs it)."""
     from scipy.linalg import eigh

@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
 from ..jit import njit
 
 ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2

@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from ..jit import njit
 
+from ..jit import njit
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK
 from .contact import contact_law, contact_law_derivatives, hertz_potential
 

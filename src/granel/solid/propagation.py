@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from ..jit import njit
 
 SERIES_LIMIT = 2.0
