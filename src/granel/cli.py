@@ -14,14 +14,29 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from . import __version__
 from . import scenario as S
+from .guard.commandline import GuardedGroup, error
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, help="granel: granular-elastic solid interface simulator")
-console = Console(stderr=True)
+app = typer.Typer(cls=GuardedGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="granel: granular-elastic solid interface simulator")
+console = Console(stderr=True, soft_wrap=True)
+
+
+def _version(value: bool):
+    if value:
+        print(f"granel {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="print granel's version and exit")):
+    """granel: granular-elastic solid interface simulator."""
 
 
 def _fail(msg: str, code: int = 2):
-    console.print(f"[bold red]error:[/] {msg}")
+    error(msg)
     raise typer.Exit(code)
 
 
@@ -49,7 +64,7 @@ def _load_or_fail(name: str, overrides: list[str], shock=None) -> S.Scenario:
     try:
         return load_scenario(name, overrides, shock)
     except S.ScenarioError as e:
-        _fail(str(e))
+        _fail(str(e), e.code)
 
 
 def _note_contact_defaults(sc: S.Scenario) -> None:
@@ -76,26 +91,26 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     return S.validate(raw, base)
 
 
-def _input_and_output(source: Path, output: Path) -> None:
-    """A command's input file must exist (exit 2) and its --output be writable and not the input."""
-    from .paths import OutputPathError, check_result_path
+def _input_and_output(source: Path, output: Path, what: str = "file") -> None:
+    """A command's input file must be a readable file (exit 2 or 4), and its --output pass the
+    output rules (`guard.outputs`) with that file as input."""
+    from .guard.outputs import OutputPlan
+    from .guard.reading import check_file
 
-    if not source.exists():
-        _fail(f"{source}: no such file")
-    try:
-        check_result_path(output, "--output", inputs=(source,))
-    except OutputPathError as e:
-        _fail(str(e), e.code)
+    check_file(source, what)
+    plan = OutputPlan(inputs=[source])
+    plan.file(output, "--output")
+    plan.check().prepare()
 
 
-def _check_folder(path: Path, option: str) -> None:
-    """An output folder, checked before any computation (exit 2 or 4)."""
-    from .paths import OutputPathError, check_folder_path
+def _check_folder(path: Path, option: str, kind: str, inputs=(), recognise=None) -> None:
+    """An output folder of the command `kind`, checked before any computation (exit 2 or 4), then
+    made and stamped."""
+    from .guard.outputs import OutputPlan
 
-    try:
-        check_folder_path(path, option)
-    except OutputPathError as e:
-        _fail(str(e), code=e.code)
+    plan = OutputPlan(inputs=[Path(p) for p in inputs if p is not None])
+    plan.folder(path, option, kind, recognise)
+    plan.check().prepare()
 
 
 def _wall_seconds(text: str | None, option: str) -> float | None:
@@ -118,21 +133,23 @@ def _wall_seconds(text: str | None, option: str) -> float | None:
     return value
 
 
-def _check_run_paths(output: Path, scenario: str, resume: Path | None, checkpoints: bool) -> Path:
+def _check_run_paths(output: Path, sc, scenario: str, resume: Path | None, checkpoints: bool) -> Path:
     """The result and checkpoint paths of `granel run`, checked before any computation (exit 2 or
-    4): the checkpoint is the result's name with .ckpt; an existing one is only ever replaced or
-    removed by the run that resumes from it."""
-    from .paths import OutputPathError, check_result_path
+    4; `guard.outputs`): the checkpoint is the result's name with .ckpt; an existing one is only
+    ever replaced or removed by the run that resumes from it."""
+    from .guard.outputs import OutputPlan
 
-    try:
-        check_result_path(output, "-o", inputs=(scenario, resume))
-    except OutputPathError as e:
-        _fail(str(e), code=e.code)
+    source = None if resume is None else (resume if resume.suffix == ".ckpt" or not resume.name
+                                          else resume.with_suffix(".ckpt"))
+    plan = OutputPlan(reserved={".ckpt": "the .ckpt suffix is kept for checkpoints; give the result a .nc name"})
+    plan.add_inputs(S.scenario_file(scenario), *S.referenced_files(sc), source)
+    plan.file(output, "-o")
+    plan.check()
     ckpt = output.with_suffix(".ckpt")
-    source = None if resume is None else (resume if resume.suffix == ".ckpt" else resume.with_suffix(".ckpt"))
     resuming = source is not None and source.exists() and source.resolve() == ckpt.resolve()
     if checkpoints and ckpt.exists() and not resuming:
         _fail(f"{ckpt} exists (the checkpoint of an earlier run?): continue it with --resume {ckpt}, or move it away")
+    plan.prepare()
     return ckpt
 
 
@@ -174,7 +191,7 @@ def run(
     wall_limit = _wall_seconds(max_wall, "--max-wall")
     sc = _load_or_fail(scenario, ov, _shock_level(shock))
     _note_contact_defaults(sc)
-    ckpt = _check_run_paths(output, scenario, resume, sc.simulation.checkpoint_every > 0)
+    ckpt = _check_run_paths(output, sc, scenario, resume, sc.simulation.checkpoint_every > 0)
     from .results import remove_stale_temporaries
 
     for path in (output, ckpt):
@@ -344,7 +361,7 @@ def paper(
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
-    _check_folder(out, "--out")
+    _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir())
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1))
@@ -391,12 +408,9 @@ def reciprocity(
     level = _shock_level(shock)
     # both directions validated before either runs
     scs = {exc: _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level) for exc in (b, a)}
-    from .paths import OutputPathError, check_folder_path
-
-    try:
-        check_folder_path(out, "--out")
-    except OutputPathError as e:
-        _fail(str(e), e.code)
+    sc0 = next(iter(scs.values()))
+    _check_folder(out, "--out", "reciprocity", inputs=(S.scenario_file(scenario), *S.referenced_files(sc0)),
+                  recognise=lambda p: any(p.glob("shock-*.nc")))
     runs = {}
     for exc, sc in scs.items():
         try:

@@ -24,14 +24,15 @@ SIDE_NAME = {"LSGM:3": "shock on LSGM granule 3", "SSGM:C": "shock on SSGM granu
 
 def save_both(fig, path) -> list[Path]:
     """Write `path` as PNG and PDF (same stem)."""
+    from .guard.writing import save_figure
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     outs = []
-    for ext in (".png", ".pdf"):
-        p = path.with_suffix(ext)
-        fig.savefig(p, bbox_inches="tight")
-        outs.append(p)
-    plt.close(fig)
+    try:
+        for ext in (".png", ".pdf"):
+            outs.append(save_figure(fig, path.with_suffix(ext), close=False, bbox_inches="tight"))
+    finally:
+        plt.close(fig)
     return outs
 
 

@@ -15,11 +15,10 @@ Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a 
 
 
 def save(fig, path: str | Path, dpi: int = 200) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    """A figure to `path`, atomically and marked as granel's (`guard.writing.save_figure`), closed."""
+    from .guard.writing import save_figure
+
+    return save_figure(fig, path, dpi=dpi, bbox_inches="tight")
 
 
 def plot_geometry(sc, output: str | Path, ax=None):

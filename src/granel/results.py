@@ -7,9 +7,7 @@ imported lazily here for that reason)."""
 
 from __future__ import annotations
 
-import os
 import sys
-import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,33 +16,20 @@ from types import SimpleNamespace
 import numpy as np
 
 from . import __version__
-
-
-@contextmanager
-def atomic_path(path: str | Path):
-    """Yield a temporary path beside `path` (named .NAME.PID.XXXX.tmp); on success rename it over
-    `path`, else remove it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+from .guard.owners import process_token, token_state
+from .guard.writing import atomic_path  # noqa: F401 - the one atomic writer, used through here too
+from .guard.writing import remove_stale_temporaries as guard_remove_stale
 
 
 def remove_stale_temporaries(path: str | Path) -> list[Path]:
-    """Remove the temporary files that `atomic_path` left beside `path` in a process that no
-    longer runs (a killed run); those of a live process are kept. Returns the removed paths."""
+    """Remove the temporary files and staging folders that killed granel processes left beside
+    `path` (`guard.writing.remove_stale_temporaries`), and those of the older naming
+    (.NAME.PID.XXXX.tmp) whose process is gone. Returns the removed paths."""
     path = Path(path)
-    removed = []
+    removed = guard_remove_stale(path.parent)
     for tmp in path.parent.glob(f".{path.name}.*.tmp"):
         pid = tmp.name[len(path.name) + 2:].split(".", 1)[0]
-        if not pid.isdigit() or _alive(int(pid)):
+        if not pid.isdigit() or token_state(process_token(int(pid))) != "dead":
             continue
         try:
             tmp.unlink()
@@ -52,16 +37,6 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
         except OSError:
             pass
     return removed
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def write_netcdf(ds, path: str | Path) -> Path:

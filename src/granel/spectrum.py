@@ -358,14 +358,13 @@ def write_spectrum(summary: xr.Dataset, spec: SpectrumSpec, path) -> xr.Dataset:
     `spectrum_dataset`), its figure (.png) and its report (.md). Returns the Dataset."""
     from pathlib import Path
 
-    from .results import atomic_path, write_netcdf
+    from .guard.owners import text_mark
+    from .guard.writing import write_text
+    from .results import write_netcdf
 
     path = Path(path)
     ds = spectrum_dataset(summary, spec)
     write_netcdf(ds, path)
-    with atomic_path(path.with_suffix(".png")) as tmp:
-        plot_spectrum(ds, Path(tmp).with_suffix(".png"))
-        Path(tmp).with_suffix(".png").replace(tmp)
-    with atomic_path(path.with_suffix(".md")) as tmp:
-        Path(tmp).write_text(spectrum_report(ds))
+    plot_spectrum(ds, path.with_suffix(".png"))
+    write_text(path.with_suffix(".md"), text_mark("<!--") + "\n" + spectrum_report(ds))
     return ds

@@ -17,7 +17,15 @@ from .build import (  # noqa: F401
     check_scenario,
     safe_time_step,
 )
-from .files import _format_validation_error, apply_overrides, builtin_names, load_raw, to_toml  # noqa: F401
+from .files import (  # noqa: F401
+    _format_validation_error,
+    apply_overrides,
+    builtin_names,
+    load_raw,
+    referenced_files,
+    scenario_file,
+    to_toml,
+)
 from .schema import (  # noqa: F401
     ContactSpec,
     ExcitationSpec,

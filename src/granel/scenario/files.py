@@ -10,6 +10,7 @@ from pathlib import Path
 import tomli_w
 from pydantic import ValidationError
 
+from ..guard.reading import InputFileError, read_toml
 from .schema import Scenario, ScenarioError
 
 
@@ -38,18 +39,24 @@ def builtin_names() -> list[str]:
 
 
 def load_raw(source: str | Path) -> tuple[dict, Path | None]:
-    """TOML text of a built-in name or a file -> (dict, base directory for relative paths)."""
+    """TOML text of a built-in name or a file -> (dict, base directory for relative paths); any
+    problem reading or parsing the file is a ScenarioError naming it (and the line), with the
+    reader's exit code (`guard.reading`)."""
     src = str(source)
     if src in builtin_names():
         text = resources.files("granel.scenario").joinpath("builtin").joinpath(f"{src}.toml").read_text()
         return tomllib.loads(text), None
     path = Path(src)
-    if not path.exists():
-        raise ScenarioError(f"scenario {src!r}: no such file and not a built-in ({', '.join(builtin_names())})")
+    if not src.strip():
+        raise ScenarioError(f"scenario {src!r}: give a built-in name ({', '.join(builtin_names())}) or a TOML file")
     try:
-        return tomllib.loads(path.read_text()), path.parent
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path}: not valid TOML: {e}") from None
+        if not path.exists() and not path.is_symlink():
+            raise ScenarioError(f"scenario {src!r}: no such file and not a built-in ({', '.join(builtin_names())})")
+        return read_toml(path, "scenario"), path.parent
+    except InputFileError as e:
+        raise ScenarioError(str(e), e.code) from None
+    except OSError as e:  # a name the file system cannot even look up (too long, ...)
+        raise ScenarioError(f"scenario {src[:80]!r}: {e.strerror or e}") from None
 
 
 def _coerce(text: str):
@@ -112,3 +119,22 @@ def to_toml(sc: Scenario) -> str:
     return tomli_w.dumps(data)
 
 
+
+
+def referenced_files(sc: Scenario) -> list[Path]:
+    """Every file the scenario reads besides itself (granule tables, load tables), as the run
+    opens them (relative to the scenario's folder)."""
+    names = [m.granules_file for m in sc.media if m.granules_file] + \
+        [e.file for e in sc.excitations if e.kind == "table" and e.file]
+    out = []
+    for name in names:
+        path = Path(name)
+        if sc.base is not None and not path.is_absolute():
+            path = sc.base / path
+        out.append(path)
+    return out
+
+
+def scenario_file(source: str | Path) -> Path | None:
+    """The file a scenario source names (None for a built-in name)."""
+    return None if str(source) in builtin_names() else Path(source)

@@ -12,12 +12,14 @@ from pydantic.fields import FieldInfo
 
 from ..excitation import (PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst,
                           read_force_csv)
+from ..guard.exits import InputError
 from ..materials import Material
 from ..units import parse_time
 
 
-class ScenarioError(ValueError):
-    """An invalid scenario; the message names the field and the value."""
+class ScenarioError(InputError):
+    """An invalid scenario; the message names the field and the value. Exit code 2, or 4 when
+    a file it refers to cannot be read."""
 
 
 def _time(v):

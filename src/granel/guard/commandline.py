@@ -1,0 +1,154 @@
+"""The exit contract of every command, in one place: whatever a command raises ends as one line
+on standard error and one of the documented exit codes (`exits`), never a traceback.
+
+`GuardedGroup` is the click group of the `granel` command: it formats usage errors on one line
+(with the replacement of a removed option), maps every exception through `exits.exit_code`, turns
+Ctrl-C and SIGTERM into exits 130 and 143, writes the traceback of an internal error (a bug) to a
+file it names, and shows Python warnings as one line each."""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+import traceback
+import warnings
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperGroup
+
+try:  # typer 0.2x carries its own copy of click
+    from typer._click.exceptions import NoSuchOption, UsageError
+except ImportError:  # pragma: no cover - older typer uses click itself
+    from click.exceptions import NoSuchOption, UsageError
+
+Exit, Abort = typer.Exit, typer.Abort
+
+from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, Terminated, exit_code, is_no_space
+from .signals import stops_as_exceptions
+
+console = Console(stderr=True, soft_wrap=True)
+
+# options of earlier releases, by command: their replacement
+REMOVED = {
+    ("run", "--output-every"): "--set simulation.output_every=VALUE (e.g. --set simulation.output_every=1us)",
+    ("run", "--fmax"): "--shock VALUE (a peak force in N, e.g. --shock 500) or --set excitations.0.fmax=VALUE",
+    ("reciprocity", "--fmax"): "--shock VALUE (a peak force in N, e.g. --shock 500)",
+}
+
+
+def one_line(text: str) -> str:
+    """A message on one line: its lines joined by '; ', runs of spaces collapsed."""
+    parts = [" ".join(p.split()) for p in str(text).splitlines()]
+    parts = [p for p in parts if p]
+    out = parts[0] if parts else ""
+    for p in parts[1:]:
+        out += (" " if out.endswith(":") else "; ") + p
+    return out
+
+
+def error(message: str) -> None:
+    console.print(f"[bold red]error:[/] {escape(one_line(message))}")
+
+
+def note(message: str) -> None:
+    console.print(f"[yellow]note:[/] {escape(one_line(message))}")
+
+
+def _warning(message, category, filename, lineno, file=None, line=None):
+    console.print(f"[yellow]warning:[/] {escape(one_line(str(message)))}")
+
+
+def _usage_message(e: UsageError) -> str:
+    command = e.ctx.command.name if e.ctx is not None and e.ctx.command is not None else ""
+    if isinstance(e, NoSuchOption):
+        hint = REMOVED.get((command, e.option_name))
+        if hint:
+            return f"{e.option_name} was removed: use {hint}"
+    text = e.format_message()
+    where = f"granel {command}" if command and command != "granel" else "granel"
+    return f"{where}: {text} (see {where} --help)"
+
+
+def crash_report(e: BaseException) -> str:
+    """Write the traceback of an internal error to a file; its path (or '' if none could be written)."""
+    try:
+        fd, path = tempfile.mkstemp(prefix=f"granel-crash-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".txt")
+        with os.fdopen(fd, "w") as fh:
+            fh.write(" ".join(sys.argv) + "\n\n")
+            traceback.print_exception(type(e), e, e.__traceback__, file=fh)
+        return path
+    except OSError:
+        return ""
+
+
+def exit_for(e: BaseException) -> int:
+    """Report `e` on one line and return its exit code."""
+    code = exit_code(e)
+    if code == INTERRUPTED:
+        error("interrupted (Ctrl-C); finished outputs are kept, and a rerun continues a study")
+    elif code == TERMINATED:
+        error("terminated (SIGTERM); finished outputs are kept, and a rerun continues a study")
+    elif code == INTERNAL:
+        if os.environ.get("GRANEL_DEBUG"):
+            raise e
+        path = crash_report(e)
+        error(f"internal error (a bug in granel, please report it): {type(e).__name__}: {one_line(str(e))[:300]}"
+              + (f"; the traceback is in {path}" if path else ""))
+    elif isinstance(e, MemoryError):
+        error("out of memory: the request needs more memory than this machine could give (lower the outputs' size or "
+              "the number of granules or modes)")
+    elif is_no_space(e) and not str(e).endswith("written there"):
+        name = getattr(e, "filename", None)
+        error(f"{name + ': ' if name else ''}no space left on the device")
+    elif isinstance(e, OSError) and not hasattr(e, "code"):
+        name = getattr(e, "filename", None)
+        error(f"{name + ': ' if name else ''}{e.strerror or e}")
+    else:
+        error(str(e))
+    return code
+
+
+class GuardedGroup(TyperGroup):
+    """The `granel` group: every command ends with one line and a documented exit code."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except Exit:
+            raise
+        except UsageError as e:
+            error(_usage_message(e))
+            raise Exit(USAGE) from None
+        except Abort:
+            error("interrupted")
+            raise Exit(INTERRUPTED) from None
+        except (Exception, KeyboardInterrupt, Terminated) as e:  # noqa: BLE001 - the one place every failure ends
+            raise Exit(exit_for(e)) from None
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        with stops_as_exceptions(), warnings.catch_warnings():
+            warnings.showwarning = _warning
+            try:
+                rv = super().main(args=args, prog_name=prog_name or "granel", complete_var=complete_var,
+                                  standalone_mode=False, **extra)
+                code = rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
+            except Exit as e:
+                code = e.exit_code
+            except UsageError as e:
+                error(_usage_message(e))
+                code = USAGE
+            except Abort:
+                error("interrupted")
+                code = INTERRUPTED
+            except BrokenPipeError:  # the reader of standard output went away (`granel scenarios | head -1`)
+                sys.stdout = open(os.devnull, "w")
+                code = 0
+            except (Exception, KeyboardInterrupt, Terminated) as e:  # noqa: BLE001
+                code = exit_for(e)
+        if standalone_mode:
+            sys.exit(code)
+        return code

@@ -1,0 +1,81 @@
+"""The exit codes of every command, and the errors that carry them.
+
+| code | meaning |
+| 0 | done |
+| 1 | an internal error (a bug): one line, the traceback in a file named there |
+| 2 | invalid input or usage, found before any computation |
+| 3 | a numerical or physical stop during the run (or, for studies, no case succeeded) |
+| 4 | a file that cannot be read or written (no space left included) |
+| 130 | interrupted (Ctrl-C) |
+| 143 | terminated (SIGTERM) |
+
+An error type carries its code as `code` (a class attribute, or set per instance); `exit_code`
+reads it for any exception, so that the command line maps every failure in one place.
+"""
+
+from __future__ import annotations
+
+import errno
+
+OK, INTERNAL, USAGE, STOPPED, FILES, INTERRUPTED, TERMINATED = 0, 1, 2, 3, 4, 130, 143
+
+
+class GranelError(Exception):
+    """An error with its exit code; the message is one line naming the field, option or file."""
+
+    code = USAGE
+
+    def __init__(self, message: str, code: int | None = None):
+        super().__init__(message)
+        if code is not None:
+            self.code = code
+
+
+class InputError(GranelError, ValueError):
+    """Invalid input found before any computation (exit 2)."""
+
+    code = USAGE
+
+
+class FileError(GranelError, OSError):
+    """A file that cannot be read or written (exit 4)."""
+
+    code = FILES
+
+
+class ResourceError(InputError):
+    """A request whose estimated memory, disk or size exceeds what the machine has or a limit
+    (exit 2), refused before anything is spent."""
+
+
+class Terminated(BaseException):
+    """SIGTERM reached the process (raised by `signals`); like KeyboardInterrupt, not an Exception,
+    so that no `except Exception` swallows it."""
+
+
+NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
+
+
+def is_no_space(e: BaseException) -> bool:
+    """A write refused because the disk (or the quota) is full, whatever library raised it
+    (h5py and HDF5 report it in the message, without errno)."""
+    if isinstance(e, OSError) and e.errno in NO_SPACE:
+        return True
+    text = str(e).lower()
+    return "no space left" in text or "disk quota exceeded" in text
+
+
+def exit_code(e: BaseException) -> int:
+    """The exit code of any exception: its own `code`, else by kind."""
+    if isinstance(e, KeyboardInterrupt):
+        return INTERRUPTED
+    if isinstance(e, Terminated):
+        return TERMINATED
+    code = getattr(e, "code", None)
+    if isinstance(code, int) and not isinstance(code, bool) and code in (USAGE, STOPPED, FILES):
+        return code
+    if isinstance(e, OSError) or is_no_space(e):
+        return FILES
+    if isinstance(e, MemoryError):
+        return STOPPED
+    return INTERNAL
