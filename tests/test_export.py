@@ -317,7 +317,9 @@ def test_csv_round_trip(runs, solid):
 
 def test_no_staging_left_and_other_files_kept(runs):
     _, folder = runs["plate"]
-    assert not [p for p in folder.iterdir() if p.name.startswith(".")]
+    from granel.guard.owners import STAMP
+
+    assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == [STAMP]  # the folder's owner, no staging
 
 
 # --------------------------------------------------------------------------------------------
@@ -361,24 +363,36 @@ def test_out_is_a_file(runs, tmp_path):
     assert target.read_text() == "keep me"
 
 
-def test_existing_files_in_out_are_kept(runs, tmp_path):
+def test_a_folder_of_the_users_files_is_refused(runs, tmp_path):
+    """An output folder that holds files granel did not write is refused before anything is
+    written (issue 28): the user's file is untouched and nothing is added."""
     folder = tmp_path / "shared"
     folder.mkdir()
     (folder / "mine.txt").write_text("keep me")
     nc = runs["rigid"][1].parent / "rigid.nc"
     code, out = invoke(["export", nc, "-o", folder, "--format", "csv"])
-    assert code == 0, out
+    assert code == 2 and "mine.txt" in out and "did not write" in out, out
     assert (folder / "mine.txt").read_text() == "keep me"
-    assert sorted(p.name for p in folder.iterdir()) == ["contacts.csv", "energies.csv", "mine.txt", "traces.csv", "walls.csv"]
+    assert sorted(p.name for p in folder.iterdir()) == ["mine.txt"]
 
 
-def test_foreign_netcdf_exits_4(tmp_path):
+def test_a_rerun_replaces_its_own_export(runs, tmp_path):
+    nc = runs["rigid"][1].parent / "rigid.nc"
+    for _ in range(2):
+        code, out = invoke(["export", nc, "-o", tmp_path / "again", "--format", "csv"])
+        assert code == 0, out
+    assert sorted(p.name for p in (tmp_path / "again").iterdir() if not p.name.startswith(".")) == \
+        ["contacts.csv", "energies.csv", "traces.csv", "walls.csv"]
+
+
+def test_foreign_netcdf_exits_2(tmp_path):
+    """A NetCDF file that reads but is not a result is refused as bad content (exit 2)."""
     import xarray as xr
 
     foreign = tmp_path / "foreign.nc"
     xr.Dataset({"temperature": ("x", np.arange(3.0))}).to_netcdf(foreign, engine="h5netcdf")
     code, out = invoke(["export", foreign, "-o", tmp_path / "out"])
-    assert code == 4 and "foreign.nc" in out and "not a granel result" in out
+    assert code == 2 and "foreign.nc" in out and "not a granel result" in out
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc, where no folder can be made")

@@ -32,6 +32,7 @@ import numpy as np  # noqa: E402
 
 from .analysis.density import granule_energies, granule_states  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
+from .results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
 
 # the paper's magnification of the deformation movies (Appendix C)
 MAGNIFICATION = {"weak": 5000.0, "moderate": 1000.0, "strong": 200.0}
@@ -79,49 +80,24 @@ def check_movie_options(max_frames=120, fps=20, magnification=None) -> None:
             raise ValueError(f"magnification must be a finite number > 0, got {magnification!r}")
 
 
-class ResultFileError(ValueError):
-    """A file that cannot be read as a granel result: unreadable, truncated, not NetCDF, or a
-    NetCDF file of something else. The message names the file."""
-
-
 # what a movie reads from a result (besides the scenario text in its attributes)
 RESULT_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
 
 
 def read_result(path) -> "xr.Dataset":
-    """A run's result file, read and checked against the scenario it carries: raises
-    ResultFileError (naming the file) for a directory, an unreadable, truncated or non-NetCDF
-    file, a NetCDF file without a granel scenario and the per-granule variables, or one whose
-    granules are not those of its scenario."""
-    from .results import read_netcdf_or
+    """A run's result file, read and checked (`run.load_result`); ResultFileError naming the file."""
+    from .run import load_result
 
-    ds = read_netcdf_or(path, ResultFileError)
-    check_result(ds, Path(path))
-    return ds
+    return load_result(path)
 
 
 def check_result(ds, name="result") -> None:
-    """ResultFileError unless `ds` looks like a granel result that a movie can be drawn from."""
-    text = ds.attrs.get("scenario")
-    if not isinstance(text, str):
-        raise ResultFileError(f"{name}: not a granel result (no scenario attribute)")
-    missing = [v for v in RESULT_VARIABLES if v not in ds.variables]
-    if missing:
-        raise ResultFileError(f"{name}: not a granel result (no {', '.join(missing)})")
-    if "time" not in ds.dims or "granule" not in ds.dims or ds.sizes["time"] < 1:
-        raise ResultFileError(f"{name}: not a granel result (no time and granule dimensions, or no output)")
-    for v in RESULT_VARIABLES:
-        if ds[v].dims != ("time", "granule"):
-            raise ResultFileError(f"{name}: damaged result ({v} has dimensions {ds[v].dims})")
-    from .figures import model_of
+    """ResultFileError unless `ds` is a granel result that fits the scenario it carries."""
+    from .results import check_result_schema
+    from .run import check_result_model
 
-    try:
-        _, system, _ = model_of(ds)
-    except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
-        raise ResultFileError(f"{name}: its scenario attribute is not a valid granel scenario ({_first_line(e)})") from None
-    labels = [str(g) for g in ds["granule"].values]
-    if labels != list(system.labels):
-        raise ResultFileError(f"{name}: damaged result ({len(labels)} granules stored, its scenario has {system.n})")
+    check_result_schema(ds, name)
+    check_result_model(ds, name)
 
 
 def _first_line(e: Exception) -> str:

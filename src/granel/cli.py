@@ -103,14 +103,35 @@ def _input_and_output(source: Path, output: Path, what: str = "file") -> None:
     plan.check().prepare()
 
 
-def _check_folder(path: Path, option: str, kind: str, inputs=(), recognise=None) -> None:
+def _check_folder(path: Path, option: str, kind: str, inputs=(), recognise=None, prepare: bool = True) -> None:
     """An output folder of the command `kind`, checked before any computation (exit 2 or 4), then
-    made and stamped."""
+    (`prepare`) made and stamped."""
     from .guard.outputs import OutputPlan
 
     plan = OutputPlan(inputs=[Path(p) for p in inputs if p is not None])
     plan.folder(path, option, kind, recognise)
+    plan.check()
+    if prepare:
+        plan.prepare()
+
+
+def _picture_output(output: Path, option: str, inputs=()) -> Path:
+    """A picture file to write: a format whose files carry granel's mark (by its suffix), and the
+    output rules (`guard.outputs`) with `inputs` as the command's inputs."""
+    from .guard.outputs import OutputPlan
+    from .guard.owners import PICTURE_FORMATS
+
+    if output.suffix.lower().lstrip(".") not in PICTURE_FORMATS:
+        _fail(f"{option} {output}: give a picture file name ending in one of {', '.join('.' + k for k in PICTURE_FORMATS)}")
+    plan = OutputPlan(inputs=[Path(p) for p in inputs if p is not None])
+    plan.file(output, option)
     plan.check().prepare()
+    return output
+
+
+def _scenario_inputs(scenario: str, sc) -> list:
+    """The files a scenario command reads: the scenario file and every file it refers to."""
+    return [S.scenario_file(scenario), *S.referenced_files(sc)]
 
 
 def _wall_seconds(text: str | None, option: str) -> float | None:
@@ -277,6 +298,7 @@ def show(
         return
     from .plots import plot_geometry
 
+    _picture_output(output, "-o", _scenario_inputs(scenario, sc))
     plot_geometry(sc, output)
     console.print(f"wrote {output}")
 
@@ -316,9 +338,13 @@ def modes(
     """Natural periods and kinds (bending / axial / bulk) of the solid's modes."""
     from .solid.modal import classify_modes, modal_analysis
 
+    if count < 1:
+        _fail(f"--count {count}: give a whole number of modes >= 1")
     sc = _load_or_fail(scenario, _overrides(solid, sets=set_))
     if sc.solid is None or sc.solid.kind in ("rigid", "none"):
         _fail(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or --solid beam")
+    if plot is not None:
+        _picture_output(plot, "--plot", _scenario_inputs(scenario, sc))
     model = S.build_problem(sc).solid
     want = max(count, 7 if plot else 0)
     md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)
@@ -473,7 +499,7 @@ def animate(
     try:
         ds = read_result(result)
     except ResultFileError as e:
-        _fail(str(e), 4)
+        _fail(str(e), e.code)
     try:
         with console.status("rendering"):
             path = _animate(ds, output, field, magnification, frames, fps)
@@ -560,19 +586,23 @@ def sweep(
     Exit code 3 if any case failed."""
     if workers < 1:
         _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
-    from .paths import OutputPathError, check_folder_path
-    from .sweep import SweepFileError, cases, load_sweep, run_sweep
+    from .sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
 
     try:
-        spec, _ = load_sweep(sweep_file)
+        spec, base_dir = load_sweep(sweep_file)
     except SweepFileError as e:
-        _fail(str(e), 4)
-    except S.ScenarioError as e:
-        _fail(str(e))
-    try:
-        check_folder_path(out, "--out")
-    except OutputPathError as e:
         _fail(str(e), e.code)
+    except S.ScenarioError as e:
+        _fail(str(e), e.code)
+    from .guard.outputs import OutputPlan
+
+    plan = OutputPlan(inputs=[sweep_file, *sweep_inputs(spec, base_dir)])
+    plan.folder(out, "--out", "sweep", recognise=lambda p: (p / "cases").is_dir() or (p / "summary.nc").exists())
+    plan.file(out / "summary.nc", "--out (its summary.nc)")
+    if spec.mode == "spectrum":
+        for suffix in (".nc", ".png", ".md"):
+            plan.file(out / f"spectrum{suffix}", f"--out (its spectrum{suffix})")
+    plan.check().prepare()
     n = len(cases(spec))
     ds, failed = _run_cases(f"sweep {spec.name}", n, lambda progress: run_sweep(sweep_file, out, workers, scheduler, progress),
                             scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
@@ -626,7 +656,6 @@ def spectrum(
     Exit code 3 if any run failed."""
     from pydantic import ValidationError
 
-    from .paths import OutputPathError, check_folder_path, check_result_path
     from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
     from .sweep import SweepSpec, check_spectrum, run_spec
 
@@ -661,11 +690,15 @@ def spectrum(
     except S.ScenarioError as e:
         _fail(str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure"))
     work = out.with_suffix(".cases")
-    try:
-        check_result_path(out, "-o", inputs=(source,))
-        check_folder_path(work, "-o (its .cases folder)")
-    except OutputPathError as e:
-        _fail(str(e), e.code)
+    from .guard.outputs import OutputPlan
+    from .sweep import sweep_inputs
+
+    plan = OutputPlan(inputs=sweep_inputs(spec, Path(".")))
+    plan.file(out, "-o")
+    plan.file(out.with_suffix(".png"), "-o (its figure)")
+    plan.file(out.with_suffix(".md"), "-o (its report)")
+    plan.folder(work, "-o (its .cases folder)", "spectrum", recognise=lambda p: (p / "cases").is_dir())
+    plan.check().prepare()
     n = len(freqs) * len(amps)
     summary, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
                                  lambda progress: run_spec(spec, Path("."), work, workers, scheduler, progress),
@@ -700,33 +733,46 @@ def design(
     if trials is not None and trials < 1:
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
-    from .design import DesignFileError, load_design, run_design
+    from .design import DesignFileError, check_design, load_design, run_design
     from .design_report import write_study_report
-    from .paths import OutputPathError, check_folder_path
+    from .guard.outputs import STAMP, OutputPlan
+    from .sweep import sweep_inputs
 
     try:
         spec, base_dir = load_design(design_file)
     except DesignFileError as e:
-        _fail(str(e), 4 if "cannot read" in str(e) else 2)
-    try:
-        check_folder_path(out, "--out")
-    except OutputPathError as e:
         _fail(str(e), e.code)
+    plan = OutputPlan(inputs=[design_file, *sweep_inputs(spec, base_dir)])
+    plan.folder(out, "--out", "design", recognise=lambda p: (p / "study.journal").exists())
+    for name in ("trials.nc", "best.toml", "report.md"):
+        plan.file(out / name, f"--out (its {name})")
+    plan.check()
+    with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
+        check_design(spec, base_dir)  # the fields, and that each variable reaches the runs: before any folder or bar
+    fresh = not out.exists()
+    plan.prepare()
     target = trials or spec.trials
     failed = []
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
-        task = bar.add_task(f"design {spec.name}", total=target)
+    try:
+        with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                      TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
+            task = bar.add_task(f"design {spec.name}", total=target)
 
-        def progress(number, status, done, total):
-            if status != "ok":
-                failed.append((number, status))
-            bar.update(task, completed=done)
+            def progress(number, status, done, total):
+                if status != "ok":
+                    failed.append((number, status))
+                bar.update(task, completed=done)
 
-        with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
-            res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress)
-            bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
-            res["files"] += write_study_report(spec, base_dir, res["study"], out)
+            with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
+                res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
+                                 check=False)
+                bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
+                res["files"] += write_study_report(spec, base_dir, res["study"], out)
+    except typer.Exit:
+        if fresh and out.is_dir() and [p.name for p in out.iterdir()] == [STAMP]:
+            (out / STAMP).unlink()  # refused before anything was written (e.g. an unreachable scheduler): no folder left
+            out.rmdir()
+        raise
     ds = res["trials"]
     ok = int((ds["status"].values == "ok").sum())
     t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],
@@ -741,6 +787,8 @@ def design(
         console.print(f"[yellow]trial {number}[/]: {status}")
     if len(failed) > 10:
         console.print(f"... and {len(failed) - 10} more failed trials (their reasons are in {out / 'trials.nc'})")
+    for w in res["warnings"]:
+        console.print(f"[bold yellow]warning:[/] {w}")
     if res["stopped"]:
         console.print(f"--timeout {timeout}: stopped after {ds.sizes['trial']} trials; run the same command to continue")
     console.print("wrote " + ", ".join(str(f) for f in res["files"][:4]) + (" ..." if len(res["files"]) > 4 else ""))
@@ -766,15 +814,17 @@ def export(
         formats = parse_formats(format_)
     except ExportError as e:
         _fail(str(e), e.code)
-    if not result.exists():
-        _fail(f"{result}: no such file")
-    if out.exists() and not out.is_dir():
-        _fail(f"-o {out}: is a file, not a folder")
+    from .guard.reading import check_file
+
+    check_file(result, "result file")
+    _check_folder(out, "-o", "export", inputs=[result], recognise=lambda p: any(p.glob("*.pvd")) or
+                  (p / "traces.csv").exists(), prepare=False)
     try:
         ds = read_export_result(result)
     except ExportError as e:
         _fail(str(e), e.code)
-    _check_folder(out, "-o")
+    _check_folder(out, "-o", "export", inputs=[result], recognise=lambda p: any(p.glob("*.pvd")) or
+                  (p / "traces.csv").exists())
     total = count_steps(ds, model_of(ds)[2], formats)
     try:
         with Progress(TextColumn("[bold]export"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
@@ -795,18 +845,15 @@ def map_(
     y: Optional[str] = typer.Option(None, help="axis along y (default: the second)"),
 ):
     """Draw a design map: a metric over two sweep axes (panels over a third)."""
-    from matplotlib.backend_bases import FigureCanvasBase
-
+    from .guard.reading import check_file
     from .sweep import SummaryFileError, plot_map, read_summary
 
-    kinds = FigureCanvasBase.get_supported_filetypes()
-    if output.suffix.lower().lstrip(".") not in kinds:
-        _fail(f"--output {output}: give a picture file name (.png, .pdf, .svg, ...)")
-    _input_and_output(summary, output)
+    check_file(summary, "sweep summary")
+    _picture_output(output, "--output", [summary])
     try:
         ds = read_summary(summary)
     except SummaryFileError as e:
-        _fail(str(e), 4)
+        _fail(str(e), e.code)
     try:
         plot_map(ds, output, metric, x, y)
     except OSError as e:

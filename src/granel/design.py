@@ -34,6 +34,7 @@ A design file (TOML):
     [[objectives]]                          # ... or a target: minimise |metric / target - 1|
     metric = "peak_wall_force_fwd_N"
     target = 500.0
+    tolerance = 0.01                        # the misfit that counts as met (the default)
 
     [[constraints]]                         # a metric with max and/or min
     metric = "granular_mass_kg"
@@ -48,6 +49,10 @@ killed is marked failed ("interrupted") and run again with the same values (its 
 if any, is reused from DIR/cases/). Each trial's sampler is seeded from the design's seed and the
 number of trials finished before it, so with one worker a resumed study asks for the same
 values as an uninterrupted one.
+
+Before anything runs, `check_design` refuses a variable whose field the base scenario cannot take
+or that no run depends on (`check_variables_matter`). After the trials, `design_warnings` says
+when a best design sits at a variable's bound or misses a target.
 """
 
 from __future__ import annotations
@@ -56,7 +61,6 @@ import hashlib
 import json
 import math
 import time
-import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
@@ -68,6 +72,14 @@ from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, c
 
 # a trial's reason when the study stopped while it ran
 INTERRUPTED = "interrupted"
+# a best value this close to a variable's bound (a share of its range, of its log for a log
+# variable) is reported as at the bound: the optimum may lie outside the range searched
+BOUND_SHARE = 0.01
+# a target objective whose best misfit |m / target - 1| exceeds this (unless the objective sets
+# its own `tolerance`) is reported as missed
+TARGET_TOLERANCE = 0.01
+# the design fields that do not define a study: a folder's study continues when only these change
+NOT_DEFINING = ("name", "description", "trials")
 
 
 def _trial_constraints() -> bool:
@@ -149,6 +161,25 @@ class VariableSpec(BaseModel):
         """Values that bracket the range, to check the field before anything runs."""
         return list(self.choices) if self.choices is not None else [self._cast(self.low), self._cast(self.high)]
 
+    def probes(self) -> list[Any]:
+        """The values at which `check_variables_matter` builds the runs: every choice, or the
+        bounds and the middle of the range (on the log scale for a log variable)."""
+        if self.choices is not None:
+            return list(self.choices)
+        mid = math.sqrt(self.low * self.high) if self.log else 0.5 * (self.low + self.high)
+        out = [self._cast(self.low), self._cast(round(mid) if self.integer else mid), self._cast(self.high)]
+        return list(dict.fromkeys(out))
+
+    def bound_of(self, value) -> str | None:
+        """"low" or "high" when `value` lies within BOUND_SHARE of the range (of its logarithm for
+        a log variable) from that bound; None inside, or for a categorical variable."""
+        if self.choices is not None or not isinstance(value, (int, float)) or isinstance(value, bool):
+            return None
+        lo, hi, x = (math.log(self.low), math.log(self.high), math.log(value)) if self.log and value > 0 else \
+            (self.low, self.high, float(value))
+        s = (x - lo) / (hi - lo)
+        return "low" if s <= BOUND_SHARE else "high" if s >= 1.0 - BOUND_SHARE else None
+
     def _cast(self, v):
         return int(v) if self.integer else float(v)
 
@@ -169,12 +200,15 @@ def _value(v):
 
 
 class ObjectiveSpec(BaseModel):
-    """A case metric to maximise or minimise, or to bring to a target (minimise |m / target - 1|)."""
+    """A case metric to maximise or minimise, or to bring to a target (minimise |m / target - 1|);
+    a target is met when the best design's misfit is at most `tolerance`."""
 
     model_config = ConfigDict(extra="forbid")
     metric: str = Field(min_length=1)
     direction: Literal["minimize", "maximize"] | None = None
     target: float | None = None
+    tolerance: float | None = Field(None, description="a target's misfit |m / target - 1| that counts as met "
+                                                      f"(default {TARGET_TOLERANCE:g})")
 
     @model_validator(mode="after")
     def _one(self):
@@ -182,7 +216,17 @@ class ObjectiveSpec(BaseModel):
             raise ValueError(f"objective {self.metric}: give either direction (minimize, maximize) or target")
         if self.target is not None and (not math.isfinite(self.target) or self.target == 0):
             raise ValueError(f"objective {self.metric}: target must be finite and non-zero, got {self.target}")
+        if self.tolerance is not None:
+            if self.target is None:
+                raise ValueError(f"objective {self.metric}: tolerance belongs to a target objective")
+            if not (math.isfinite(self.tolerance) and self.tolerance > 0):
+                raise ValueError(f"objective {self.metric}: tolerance must be a positive misfit, got {self.tolerance}")
         return self
+
+    @property
+    def met_within(self) -> float:
+        """The misfit at which this target counts as met."""
+        return TARGET_TOLERANCE if self.tolerance is None else self.tolerance
 
     @property
     def name(self) -> str:
@@ -348,21 +392,22 @@ def band_metrics(spec, per_frequency: list[dict]) -> dict[str, float]:
 def evaluate_trial(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = False) -> dict:
     """A trial on a worker: its case by the sweep engine's `run_case` (metrics only, unless
     `keep_runs`), or in spectrum mode one case per frequency of the band and the band's metrics
-    (`band_metrics`; any frequency failing fails the trial, with its reason)."""
+    (`band_metrics`; any frequency failing fails the trial, with its reason). `reused`: every
+    case was a stored result (`_timed_case`)."""
     from .spectrum import FREQUENCY_FIELD
-    from .sweep import run_case
 
     spec = DesignSpec.model_validate_json(spec_json)
     if spec.mode != "spectrum":
-        return run_case(spec_json, base_dir, case, out_dir, keep_runs)
+        return _timed_case(spec_json, base_dir, case, out_dir, keep_runs)
     start = time.perf_counter()
-    res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0}
+    res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0, "reused": True}
     per = []
     for k, f in enumerate(spec.frequencies):
         sub = {"index": [*case["index"], k], "overrides": {**case["overrides"], FREQUENCY_FIELD: float(f)},
                "tag": f"{case['tag']}-f{k:03d}"}
-        r = run_case(spec_json, base_dir, sub, out_dir, keep_runs)
+        r = _timed_case(spec_json, base_dir, sub, out_dir, keep_runs)
         res["solver_s"] += float(r.get("solver_s", 0.0))
+        res["reused"] = res["reused"] and r["reused"]
         if r.get("status") != "ok":
             res["status"] = f"{r.get('status')} (at {f:g} Hz)"
             break
@@ -374,17 +419,29 @@ def evaluate_trial(spec_json: str, base_dir: str, case: dict, out_dir: str, keep
     return res
 
 
+def _timed_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool) -> dict:
+    """`run_case`, with the times of this call: a case whose stored result was returned (the
+    same values asked again) reports the stored run's times, longer than the call itself; it
+    is marked `reused`, with this call's wall time and no solver time."""
+    from .sweep import run_case
+
+    start = time.perf_counter()
+    r = run_case(spec_json, base_dir, case, out_dir, keep_runs)
+    took = time.perf_counter() - start
+    reused = float(r.get("wall_s", 0.0)) > took  # a fresh case's wall_s is measured within this call
+    return {**r, "reused": reused, **({"wall_s": took, "solver_s": 0.0} if reused else {})}
+
+
 def load_design(path) -> tuple[DesignSpec, Path]:
-    """A design file -> (DesignSpec, its folder); DesignFileError names the file and the field."""
+    """A design file -> (DesignSpec, its folder); DesignFileError names the file and the field
+    (or the line), with the reader's exit code (`guard.reading`)."""
+    from .guard.reading import InputFileError, read_toml
+
     path = Path(path)
-    if not path.is_file():
-        raise DesignFileError(f"design {path}: no such file")
     try:
-        raw = tomllib.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise DesignFileError(f"design {path}: cannot read it as text ({e})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise DesignFileError(f"design {path}: not valid TOML: {e}") from None
+        raw = read_toml(path, "design")
+    except InputFileError as e:
+        raise DesignFileError(str(e), e.code) from None
     try:
         spec = DesignSpec.model_validate(raw)
     except ValidationError as e:
@@ -417,6 +474,182 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
             raise DesignFileError(f"variables.{k}.field = {var.field!r}{' (or a tied field)' if var.tied else ''}: the "
                                   "base scenario refuses it "
                                   f"({var.field} = {v!r}: {' '.join(msg.split())})")
+    check_variables_matter(spec, base_dir)
+
+
+# ---------------------------------------------------------------- variables that no run depends on
+
+
+def _digest(obj) -> str:
+    """A fingerprint of a built object: its dataclass fields, arrays, sparse matrices, containers
+    and numbers, recursively (callables by their type only)."""
+    import dataclasses
+
+    import scipy.sparse as sp
+
+    h = hashlib.sha256()
+
+    def feed(x, depth=0):
+        if depth > 40:
+            raise RecursionError("too deep")
+        if x is None or isinstance(x, (bool, int, str)):
+            h.update(repr(x).encode())
+        elif isinstance(x, float):
+            h.update(x.hex().encode() if math.isfinite(x) else repr(x).encode())
+        elif isinstance(x, np.generic):
+            feed(x.item(), depth)
+        elif isinstance(x, np.ndarray):
+            h.update(f"nd{x.dtype.str}{x.shape}".encode())
+            if x.dtype == object:
+                for v in x.ravel():
+                    feed(v, depth + 1)
+            else:
+                h.update(np.ascontiguousarray(x).tobytes())
+        elif sp.issparse(x):
+            x = x.tocsr().copy()
+            x.sum_duplicates()
+            x.sort_indices()
+            h.update(f"sp{x.shape}".encode())
+            for a in (x.data, x.indices, x.indptr):
+                feed(a, depth + 1)
+        elif isinstance(x, (list, tuple)):
+            h.update(f"({type(x).__name__}{len(x)}".encode())
+            for v in x:
+                feed(v, depth + 1)
+            h.update(b")")
+        elif isinstance(x, dict):
+            h.update(f"{{{len(x)}".encode())
+            for key in sorted(x, key=repr):
+                feed(key, depth + 1)
+                feed(x[key], depth + 1)
+            h.update(b"}")
+        elif dataclasses.is_dataclass(x):
+            h.update(type(x).__name__.encode())
+            feed({f.name: getattr(x, f.name) for f in dataclasses.fields(x)}, depth + 1)
+        elif callable(x):
+            h.update(f"fn:{type(x).__name__}".encode())
+        elif hasattr(x, "__dict__"):
+            h.update(type(x).__name__.encode())
+            feed(vars(x), depth + 1)
+        else:
+            h.update(repr(x).encode())
+
+    feed(obj)
+    return h.hexdigest()
+
+
+def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | None:
+    """The runs of a trial with these overrides, as the solver would receive them short of the
+    solid: [(scenario, its granular system, fingerprint of the system, its initial state and the
+    resolved [simulation] table)], or None when the design is invalid there."""
+    from .scenario.build import build_granular
+    from .sweep import case_scenarios
+
+    ov = dict(overrides)
+    if spec.mode == "spectrum":
+        from .spectrum import FREQUENCY_FIELD
+
+        ov[FREQUENCY_FIELD] = float(spec.frequencies[0])
+    try:
+        runs = case_scenarios(spec, base_dir, {"index": [0], "overrides": ov, "tag": "probe"})
+        out = []
+        for _, sc in runs:
+            system, state, _ = build_granular(sc, sc.base)
+            out.append((sc, system, _digest((system, state, sc.simulation.model_dump()))))
+        return out
+    except Exception:  # noqa: BLE001 - a design invalid there is a failed trial, not a verdict on the variable
+        return None
+
+
+def _solid_digests(runs: list) -> list[str] | None:
+    """The fingerprints of the runs' solid models (`build_solid`), or None if one cannot be built."""
+    from .scenario.build import build_solid
+
+    try:
+        return [_digest(build_solid(sc, system)) for sc, system, _ in runs]
+    except Exception:  # noqa: BLE001 - a solid this design cannot build is a failed trial, not a verdict
+        return None
+
+
+def _depends(spec: DesignSpec, base_dir: Path, var: VariableSpec, context: dict) -> bool:
+    """Whether the runs built at `var`'s probe values (the other fields at `context`) differ: in
+    their granular systems, initial states or [simulation] tables, else in their solids (built
+    only then). Fewer than two valid probes cannot tell: True."""
+    built = []
+    for v in var.probes():
+        runs = _probe_runs(spec, base_dir, {**context, **{f: v for f in var.fields}})
+        if runs is not None:
+            built.append(runs)
+    if len(built) < 2:
+        return True
+    if len({tuple(d for _, _, d in runs) for runs in built}) > 1:
+        return True
+    solids = [d for d in (_solid_digests(runs) for runs in built) if d is not None]
+    return len(solids) < 2 or len({tuple(d) for d in solids}) > 1
+
+
+def _field_value(sc: S.Scenario, field: str):
+    """A dotted field of a resolved scenario (list items by index), or a marker if absent."""
+    x: Any = sc.model_dump(mode="json")
+    for part in field.split("."):
+        if isinstance(x, list) and part.isdigit() and int(part) < len(x):
+            x = x[int(part)]
+        elif isinstance(x, dict) and part in x:
+            x = x[part]
+        else:
+            return "(absent)"
+    return x
+
+
+def _why_inert(spec: DesignSpec, base_dir: Path, var: VariableSpec) -> str:
+    """A reader's hint at why a variable's values build the same runs."""
+    runs = [r for r in (_probe_runs(spec, base_dir, {f: v for f in var.fields}) for v in var.probes()) if r]
+    if not runs:
+        return "the solver never receives it"
+    sc = runs[0][0][0]
+    if len({json.dumps([_field_value(r[0], var.field) for r in rs], sort_keys=True) for rs in runs}) == 1:
+        return f"the design's {spec.mode!r} mode sets it in every run"
+    parts = var.field.split(".")
+    leaf = parts[-1]
+    if parts[0] == "excitations" and len(parts) >= 3 and parts[1].isdigit() and int(parts[1]) < len(sc.excitations):
+        return f"excitations.{parts[1]} is a {sc.excitations[int(parts[1])].kind} load, which does not use {leaf}"
+    if parts[0] == "solid":
+        kind = "none" if sc.solid is None else sc.solid.kind
+        return "the design has no solid" if kind == "none" else f"the {kind} solid does not use {'.'.join(parts[1:])}"
+    if parts[0] == "materials" and len(parts) >= 2:
+        used = {n for m in sc.media for n in [m.material, *(m.materials or [])]}
+        if sc.solid is not None and sc.solid.kind in ("beam", "plate"):
+            used.add(sc.solid.material)
+        if parts[1] not in used:
+            return f"no granule and no elastic solid is made of {parts[1]}"
+        return f"the runs do not use the {leaf} of {parts[1]}"
+    if parts[0] == "media" and len(parts) >= 3:
+        return f"media.{parts[1]} is built without {'.'.join(parts[2:])}"
+    return "the solver never receives it"
+
+
+def check_variables_matter(spec: DesignSpec, base_dir: Path) -> None:
+    """Refuse (DesignFileError naming the variable) a variable that no run of the design depends
+    on: its probe values (`VariableSpec.probes`) build the same granular systems, initial states,
+    [simulation] tables and solids (everything `scenario.build_problem` hands the solver, the
+    static equilibrium being a function of them), with the other variables at their base
+    values and then at each of their own probes in turn (a field may matter only with another's
+    value, e.g. a pulse's duration once a load's kind is a variable). No run and no modal
+    analysis: a plate is assembled only where all else agrees, and is usually cached."""
+    for k, var in enumerate(spec.variables):
+        if _depends(spec, base_dir, var, {}):
+            continue
+        others = ({f: v for f in o.fields} for j, o in enumerate(spec.variables) if j != k for v in o.probes())
+        if any(_depends(spec, base_dir, var, ctx) for ctx in others):
+            continue
+        values = ", ".join(_fmt_value(v) for v in var.probes())
+        raise DesignFileError(f"variables.{k}.field = {var.field!r}: no run of this design depends on it "
+                              f"({_why_inert(spec, base_dir, var)}): its values {values} build the same granules, "
+                              "loads, solid and solver settings")
+
+
+def _fmt_value(v) -> str:
+    return f"{v:.6g}" if isinstance(v, float) else json.dumps(v) if not isinstance(v, str) else repr(v)
 
 
 def trial_case(spec: DesignSpec, number: int, params: dict) -> dict:
@@ -470,9 +703,28 @@ def ask_trial(study, spec: DesignSpec, dists: dict):
     return study.ask(fixed_distributions=dists)
 
 
-def open_study(spec: DesignSpec, out: Path):
+def design_inputs(spec: DesignSpec, base_dir: Path) -> dict[str, str]:
+    """The contents' digests of what every trial reads: the base scenario (a built-in's text, or
+    its file) and every granule or load table it names (`sweep.sweep_inputs`)."""
+    from importlib import resources
+
+    from .guard.fingerprints import file_digest, text_digest
+    from .sweep import sweep_inputs
+
+    out = {}
+    if spec.base in S.builtin_names():
+        out[f"built-in {spec.base}"] = text_digest(resources.files("granel.scenario").joinpath("builtin")
+                                                   .joinpath(f"{spec.base}.toml").read_text())
+    for p in sweep_inputs(spec, base_dir):
+        out[str(p)] = file_digest(p)
+    return out
+
+
+def open_study(spec: DesignSpec, out: Path, base_dir: Path | None = None):
     """The design's Optuna study in out/study.journal, created or continued. A folder that holds
-    a study of another design is refused (DesignFileError)."""
+    a study of another design is refused (DesignFileError naming each field that differs, with
+    its stored and its new value; `design_differences`), and so is a study whose inputs (the base
+    scenario, its tables: `design_inputs`, when `base_dir` is given) changed since it began."""
     import optuna
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
@@ -481,22 +733,85 @@ def open_study(spec: DesignSpec, out: Path):
     storage = JournalStorage(JournalFileBackend(str(out / "study.journal")))
     study = optuna.create_study(study_name="granel-design", storage=storage, directions=spec.directions,
                                 load_if_exists=True)
-    mine = json.loads(spec.model_dump_json(exclude={"trials"}))
+    mine = json.loads(spec.model_dump_json())
     held = study.user_attrs.get("design")
-    if held is None:
-        study.set_user_attr("design", mine)
-    elif not same_design(held, mine):
-        raise DesignFileError(f"-o {out}: it holds a study of another design (name {held.get('name')!r}); "
-                              "write this one to another folder")
+    diff = design_differences(held, mine) if held is not None else []
+    if diff:
+        said = "; ".join(f"{f}: {_short(a)} there, {_short(b)} here" for f, a, b in diff)
+        raise DesignFileError(f"-o {out}: it holds a study of another design ({said}); write this one to another "
+                              "folder, or restore those fields")
+    if base_dir is not None:
+        from .guard.fingerprints import changed
+
+        now, before = design_inputs(spec, base_dir), study.user_attrs.get("inputs")
+        moved = changed(before, now) if isinstance(before, dict) else []
+        if moved:
+            raise DesignFileError(f"-o {out}: the study's inputs changed since it began ({', '.join(moved)}): its trials "
+                                  "would mix the old and the new; restore them, or write this study to another folder")
+        if before != now:
+            study.set_user_attr("inputs", now)
+    if held != mine:
+        study.set_user_attr("design", mine)  # the latest name, description, budget and tolerances
     return study
 
 
+def _short(v, width: int = 60) -> str:
+    text = "(unset)" if v is _UNSET else json.dumps(v)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+_UNSET = object()
+
+
+def _defaults(model) -> dict:
+    """A pydantic model's field defaults, as JSON values."""
+    from pydantic_core import PydanticUndefined, to_json
+
+    out = {}
+    for name, f in model.model_fields.items():
+        d = f.get_default(call_default_factory=True)
+        if d is not PydanticUndefined:
+            out[name] = json.loads(to_json(d))
+    return out
+
+
+def design_differences(held: dict, mine: dict) -> list[tuple[str, Any, Any]]:
+    """The fields that define a study and differ between a stored design (JSON) and this one:
+    [(dotted field, stored value, this value)]. Every field defines it but NOT_DEFINING and the
+    objectives' `tolerance` (they change no trial); a field the stored design lacks (added by a
+    later granel) counts as its default."""
+    from .spectrum import SpectrumSpec
+
+    child = {"variables": VariableSpec, "objectives": ObjectiveSpec, "constraints": ConstraintSpec,
+             "spectrum": SpectrumSpec}
+    skip = {"objectives": ("tolerance",)}
+    out: list[tuple[str, Any, Any]] = []
+
+    def walk(path: str, a, b, model, ignore=()):
+        if model is not None and isinstance(a, dict) and isinstance(b, dict):
+            d = _defaults(model)
+            for key in dict.fromkeys([*a, *b]):
+                if key in ignore:
+                    continue
+                top = model is DesignSpec
+                walk(f"{path}.{key}" if path else key, a.get(key, d.get(key, _UNSET)), b.get(key, d.get(key, _UNSET)),
+                     child.get(key) if top else None, skip.get(key, ()) if top else ())
+        elif model is not None and isinstance(a, list) and isinstance(b, list):
+            if len(a) != len(b):
+                out.append((f"{path} (count)", len(a), len(b)))
+            else:
+                for k, (x, y) in enumerate(zip(a, b)):
+                    walk(f"{path}.{k}", x, y, model, ignore)
+        elif a != b:
+            out.append((path, a, b))
+
+    walk("", held, mine, DesignSpec, NOT_DEFINING)
+    return out
+
+
 def same_design(held: dict, mine: dict) -> bool:
-    """Whether a stored design (as JSON) is this one: every stored field equal, and any field
-    the stored one lacks (added by a later granel) at its default."""
-    defaults = json.loads(DesignSpec.model_construct().model_dump_json(exclude={"trials"}, warnings=False))
-    return all(mine.get(k) == v for k, v in held.items()) and \
-        all(k in held or k not in defaults or v == defaults[k] for k, v in mine.items())
+    """Whether a stored design (as JSON) defines the same study as this one (`design_differences`)."""
+    return not design_differences(held, mine)
 
 
 def recover_interrupted(study) -> int:
@@ -542,6 +857,7 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
 
     values, cons, reason = score(spec, result)
     trial.set_user_attr("tag", result.get("tag", ""))
+    trial.set_user_attr("reused", bool(result.get("reused", False)))
     for key in ("wall_s", "solver_s", "turnaround_s"):
         trial.set_user_attr(key, float(result.get(key, float("nan"))))
     trial.set_user_attr("metrics", {k: float(v) for k, v in result.get("metrics", {}).items()
@@ -560,12 +876,14 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
 
 def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
                scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
-               progress=None) -> dict:
+               progress=None, check: bool = True) -> dict:
     """Run (or continue) the study until `trials` trials (default: the design's) have finished,
     on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
     trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
-    Writes trials.nc and the best designs (`write_outputs`; the figures and report.md are
-    `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best"}."""
+    `check_design` runs first unless `check` is false (the caller ran it). Writes trials.nc and
+    the best designs (`write_outputs`; the figures and report.md are
+    `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best",
+    "warnings"} (`design_warnings`)."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     from .sweep import _connect
@@ -573,12 +891,13 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
     target = int(trials or spec.trials)
-    check_design(spec, base_dir)
+    if check:
+        check_design(spec, base_dir)
     client = _connect(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        study = open_study(spec, out)
+        study = open_study(spec, out, base_dir)
         recover_interrupted(study)
     except BaseException:
         if client is not None:
@@ -636,7 +955,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     study.set_user_attr("sessions", sessions)
     written = write_outputs(spec, base_dir, study, out)
     return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],
-            "best": written["best"]}
+            "best": written["best"], "warnings": written["warnings"]}
 
 
 # ---------------------------------------------------------------- outputs
@@ -667,6 +986,8 @@ def trials_dataset(spec: DesignSpec, study):
     data["feasible"] = ("trial", np.array(feasible, bool))
     data["status"] = ("trial", np.array([_status(t) for t in ts], dtype=str))
     data["reason"] = ("trial", np.array([str(t.user_attrs.get("reason", "")) for t in ts], dtype=str))
+    data["reused"] = ("trial", np.array([bool(t.user_attrs.get("reused", False)) for t in ts], bool),
+                      {"long_name": "the trial's values had been run: its case's stored result was used"})
     for key, what in (("wall_s", "the case's time in its worker"), ("solver_s", "its runs' time in the solver"),
                       ("turnaround_s", "launch to result, as the study saw it")):
         data[key] = ("trial", np.array([t.user_attrs.get(key, np.nan) for t in ts], float), {"units": "s", "long_name": what})
@@ -675,8 +996,44 @@ def trials_dataset(spec: DesignSpec, study):
         data[f"metric_{m}"] = ("trial", np.array([t.user_attrs.get("metrics", {}).get(m, np.nan) for t in ts], float))
     ds = xr.Dataset(data, coords={"trial": np.array([t.number for t in ts], int)})
     ds.attrs.update({"design": spec.model_dump_json(), "name": spec.name, "directions": json.dumps(spec.directions),
-                     "trials": n})
+                     "trials": n, "warnings": json.dumps(design_warnings(spec, study, best_trials(spec, study)))})
     return ds
+
+
+def design_warnings(spec: DesignSpec, study, best: list) -> list[str]:
+    """What a reader must know about a study's best designs: a variable at a bound (within
+    BOUND_SHARE of its range: the optimum may lie beyond it), a target missed (the best misfit
+    above the objective's tolerance; on a Pareto front, by every design of it), no finished trial
+    meeting the constraints."""
+    from optuna.trial import TrialState
+
+    if not best:
+        done = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+        return ["no finished trial meets the constraints: there is no best design"] if done and spec.constraints else []
+    out = []
+    front = len(spec.objectives) > 1
+    for var in spec.variables:
+        sides: dict[str, list] = {}
+        for t in best:
+            side = var.bound_of(_value(t.params.get(var.field)))
+            if side is not None:
+                sides.setdefault(side, []).append(t)
+        for side, ts in sides.items():
+            bound = var.low if side == "low" else var.high
+            where = f"{len(ts)} of the {len(best)} Pareto designs" if front else f"the best design (trial {ts[0].number})"
+            value = "" if front else f" = {_fmt_value(ts[0].params[var.field])}"
+            out.append(f"{var.field}{value} in {where} is at its {side} bound {bound:g} (within {100 * BOUND_SHARE:g} % of "
+                       f"the range{', on the log scale' if var.log else ''}): the optimum may lie outside the range")
+    for k, o in enumerate(spec.objectives):
+        if o.target is None:
+            continue
+        t = min(best, key=lambda t: t.values[k])
+        if t.values[k] > o.met_within:
+            m = t.user_attrs.get("metrics", {}).get(o.metric, math.nan)
+            who = "no design of the Pareto front meets" if front else "the best design misses"
+            out.append(f"{who} the target {o.metric} = {o.target:g}: trial {t.number} gives {m:.6g}, a misfit "
+                       f"|m / target - 1| of {t.values[k]:.3g} (tolerance {o.met_within:g})")
+    return out
 
 
 def _status(t) -> str:
@@ -714,17 +1071,18 @@ def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenari
 
 
 def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    from .guard.writing import write_text
+
+    write_text(path, text)
 
 
 HEADER = "# written by granel design"
 
 
 def write_outputs(spec: DesignSpec, base_dir: Path, study, out: Path) -> dict:
-    """trials.nc, and best.toml (one objective) or pareto/NN.toml (several): each a scenario that
-    `granel run` takes as it is, headed by its trial and objective values. Stale pareto/NN.toml
+    """trials.nc (with the study's `design_warnings` as its `warnings` attribute), and best.toml
+    (one objective) or pareto/NN.toml (several): each a scenario that `granel run` takes as it
+    is, headed by its trial and objective values. Stale pareto/NN.toml
     files of this study (headed as granel design writes them) are removed; no other file is."""
     from .results import write_netcdf
 
@@ -754,4 +1112,4 @@ def write_outputs(spec: DesignSpec, base_dir: Path, study, out: Path) -> dict:
         for old in folder.glob("[0-9][0-9].toml"):
             if old.name not in keep and old.read_text().startswith(HEADER):
                 old.unlink()
-    return {"trials": ds, "files": files, "best": best}
+    return {"trials": ds, "files": files, "best": best, "warnings": json.loads(ds.attrs["warnings"])}

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, evaluate_trial, trial_case
+from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, design_warnings, evaluate_trial,
+                     trial_case)
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
@@ -88,12 +89,10 @@ def _quiet():
 
 def _save(fig, path: Path) -> Path:
     """A finished figure to `path` (PNG at 130 dpi), closed."""
-    import matplotlib.pyplot as plt
+    from .guard.writing import save_figure
 
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=130)
 
 
 def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
@@ -323,7 +322,10 @@ def _fmt(v) -> str:
 
 def study_speed(study) -> dict:
     """Trials per minute over the study's sessions and the share of a trial spent outside the
-    solver (1 - solver time / launch-to-result time, over finished trials)."""
+    solver: 1 - solver time / launch-to-result time, summed over finished trials. A trial that
+    reused a stored case (its values asked again) spent no time in the solver; in a journal
+    written before trials were marked `reused`, such a trial shows as a case time longer than
+    its launch-to-result time, which a run of its own never has."""
     from optuna.trial import TrialState
 
     sessions = study.user_attrs.get("sessions", [])
@@ -332,11 +334,14 @@ def study_speed(study) -> dict:
     ts = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
     solver = np.array([t.user_attrs.get("solver_s", np.nan) for t in ts], float)
     turn = np.array([t.user_attrs.get("turnaround_s", np.nan) for t in ts], float)
+    case = np.array([t.user_attrs.get("wall_s", np.nan) for t in ts], float)
+    reused = np.array([bool(t.user_attrs.get("reused", False)) for t in ts], bool) | (case > turn)
+    solver = np.where(reused, 0.0, solver)
     ok = np.isfinite(solver) & np.isfinite(turn) & (turn > 0)
     return {"trials_per_min": 60.0 * n / wall if wall > 0 else math.nan, "trials": n, "wall_s": wall,
             "workers": max((s["workers"] for s in sessions), default=0),
             "outside_solver": float(1.0 - solver[ok].sum() / turn[ok].sum()) if ok.any() else math.nan,
-            "median_trial_s": float(np.median(turn[ok])) if ok.any() else math.nan}
+            "median_trial_s": float(np.median(turn[ok])) if ok.any() else math.nan, "reused": int(reused.sum())}
 
 
 def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path], out: Path,
@@ -352,6 +357,9 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
     lines = [f"# Design study {spec.name!r}", ""]
     if spec.description:
         lines += [spec.description, ""]
+    warned = design_warnings(spec, study, best_trials(spec, study))
+    if warned:
+        lines += ["**Warnings:**", ""] + [f"- {w}" for w in warned] + [""]
     lines += [f"Base scenario `{spec.base}` with {len(spec.overrides)} override(s); mode `{spec.mode}`"
               + (f", pair {spec.pair[0]} / {spec.pair[1]}" if spec.mode == "reciprocity" else "") + ".", "",
               "| variable | range |", "| --- | --- |"]
@@ -362,7 +370,7 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
         lines.append(f"| `{v.field}`{tied} | {rng} |")
     lines += ["", "| objective | sense |", "| --- | --- |"]
     for o in spec.objectives:
-        lines.append(f"| `{o.metric}` | " + (f"{o.direction}" if o.target is None else f"to {o.target:g} (minimise abs(m / target - 1))")
+        lines.append(f"| `{o.metric}` | " + (f"{o.direction}" if o.target is None else f"to {o.target:g} (minimise abs(m / target - 1); met within {o.met_within:g})")
                      + " |")
     for c in spec.constraints:
         lines.append(f"| constraint `{c.metric}` | " + " and ".join(
@@ -373,7 +381,9 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
               f"**Speed:** {sp['trials_per_min']:.1f} trials per minute on {sp['workers']} worker(s) "
               f"({sp['trials']} trials in {sp['wall_s']:.1f} s of this study's sessions); a trial's median "
               f"launch-to-result time {sp['median_trial_s']:.2f} s, of which {100 * sp['outside_solver']:.0f} % outside "
-              "the solver (scenario building, compiled kernels' loading, metrics, scheduling).", ""]
+              "the solver (scenario building, compiled kernels' loading, metrics, scheduling)"
+              + (f"; {sp['reused']} finished trial(s) asked values already run and reused their case (no solver time)"
+                 if sp["reused"] else "") + ".", ""]
     reasons: dict[str, int] = {}
     for t in failed:
         key = str(t.user_attrs.get("reason", "?")).split("\n")[0][:160]
@@ -412,11 +422,10 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
     lines += ["Files: `trials.nc` (every trial), " + ("`best.toml`" if len(spec.objectives) == 1 else "`pareto/NN.toml`")
               + " (runnable by `granel run`), `study.journal` (Optuna's journal: a rerun continues it), "
               "`reevaluation/cases/` (the runs above).", ""]
-    path = out / "report.md"
-    tmp = path.with_name("report.md.tmp")
-    tmp.write_text("\n".join(lines))
-    tmp.replace(path)
-    return path
+    from .guard.owners import text_mark
+    from .guard.writing import write_text
+
+    return write_text(out / "report.md", "\n".join([text_mark("<!--"), *lines]))
 
 
 def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path) -> list[Path]:

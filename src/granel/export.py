@@ -17,9 +17,11 @@ Formats (any combination):
   (time, wall, normal, tangential), ``contacts.csv`` (time, contact, normal, tangential) and
   ``energies.csv`` (time and the energy-ledger variables that have only the time dimension).
 
-Every file is first written into a hidden staging folder inside the output folder and then moved
-into place with `os.replace` (so each file appears whole); the staging folder, and only it, is
-removed afterwards. Files of the same names are replaced; nothing else in the folder is touched.
+Every file is first written into a hidden staging folder inside the output folder (named after
+the exporting process, so that the next export removes it whatever killed this one), synced, then
+moved into place with `os.replace` (so each file appears whole); the staging folder, and only it,
+is removed afterwards. The output folder is granel's own (`guard.outputs`): files of the same
+names are replaced; nothing else in the folder is touched.
 
 The solid's nodal fields are rebuilt with the functions the movies use: the solid model from the
 result's scenario text (`figures.model_of`), the reduced state at the stored solid outputs
@@ -48,11 +50,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
+
+from .guard.writing import fsync_path, staging_folder
 
 FORMATS = ("vtk", "xdmf", "csv", "extxyz")
 EXTXYZ_PROPERTIES = "species:S:1:pos:R:3:radius:R:1:velo:R:3:omega:R:1"
@@ -92,13 +95,15 @@ def parse_formats(values: Iterable[str] | None) -> list[str]:
 
 
 def read_export_result(path) -> "xr.Dataset":
-    """A run's result, checked as the movies check it; ExportError (code 4) naming the file."""
-    from .animate import ResultFileError, read_result
+    """A run's result, checked (`run.load_result`); ExportError naming the file, with the
+    reader's code (4: not readable as NetCDF, 2: not a result or damaged)."""
+    from .results import ResultFileError
+    from .run import load_result
 
     try:
-        return read_result(path)
+        return load_result(path)
     except ResultFileError as e:
-        raise ExportError(str(e), 4) from None
+        raise ExportError(str(e), e.code) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -378,7 +383,7 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
     out.mkdir(parents=True, exist_ok=True)
     sc, system, model = model_of(ds)
     elastic = elastic_constants(sc) if has_solid(ds, model) else (0.0, 0.0)
-    stage = Path(tempfile.mkdtemp(prefix=f".granel-export.{os.getpid()}.", dir=out))
+    stage = staging_folder(out)
     written = []
     try:
         files = []
@@ -394,8 +399,11 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
         for rel in sorted(files, key=lambda r: r.endswith((".pvd", ".xdmf"))):
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
+            fsync_path(stage / rel)
             os.replace(stage / rel, target)
             written.append(target)
+        for folder in {t.parent for t in written}:
+            fsync_path(folder)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     return written

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,3 +27,4 @@ class Problem:
     solid_force0: np.ndarray | None = None  # (nc, 2) the static forces on the solid at t = 0 (a preload)
     equilibrium: dict | None = None  # the static equilibrium's numbers (granular.static.Equilibrium.summary)
     equilibrium_contacts: tuple | None = None  # its loaded contacts: names, forces, overlaps (Equilibrium.contacts)
+    inputs: dict = field(default_factory=dict)  # {file name: content digest} of the files the scenario reads

@@ -16,6 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from . import __version__
+from .guard.exits import GranelError
 from .guard.owners import process_token, token_state
 from .guard.writing import atomic_path  # noqa: F401 - the one atomic writer, used through here too
 from .guard.writing import remove_stale_temporaries as guard_remove_stale
@@ -42,7 +43,11 @@ def remove_stale_temporaries(path: str | Path) -> list[Path]:
 def write_netcdf(ds, path: str | Path) -> Path:
     """Write atomically (temporary file in the same directory, then rename). The arrays are in
     memory, so dask (if this process has it) is told to write synchronously: xarray would
-    otherwise hand the write to whatever dask client is current, even a broken one."""
+    otherwise hand the write to whatever dask client is current, even a broken one. Every file
+    carries the `granel_version` attribute: granel's mark (`guard.owners.is_granel_file`)."""
+    if "granel_version" not in ds.attrs:
+        ds = ds.copy(deep=False)
+        ds.attrs["granel_version"] = __version__
     with atomic_path(path) as tmp, _synchronous_dask():
         ds.to_netcdf(tmp, engine="h5netcdf", invalid_netcdf=False)
     return Path(path)
@@ -58,18 +63,104 @@ def _synchronous_dask():
         yield
 
 
-def read_netcdf_or(path: str | Path, error, what: str = "result file"):
-    """`read_netcdf` for a file given by a user: a directory, or a file that cannot be read as
-    NetCDF (missing, truncated, foreign), raises `error` (an exception class) with a message
-    naming the file."""
+class ResultFileError(GranelError, ValueError):
+    """A file that cannot be used as a granel result or summary; the message names the file.
+    `code` 4: it cannot be read as NetCDF (missing data, truncated, not HDF5); 2: it reads, but
+    is not what the command takes (another kind of file, a variable missing or cut, NaN where a
+    state must be finite)."""
+
+    code = 4
+
+
+def read_netcdf_or(path: str | Path, error=ResultFileError, what: str = "result file"):
+    """`read_netcdf` for a file given by a user (`guard.reading.check_file` first): a file that
+    cannot be read as NetCDF (truncated, foreign bytes) raises `error` (an exception class) with a
+    message naming the file (exit code 4)."""
+    from .guard.reading import InputFileError, check_file
+
     path = Path(path)
-    if path.is_dir():
-        raise error(f"{path}: a directory, not a {what}")
+    try:
+        check_file(path, what)
+    except InputFileError as e:
+        raise _with_code(error(str(e)), e.code) from None
     try:
         return read_netcdf(path)
     except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
         lines = str(e).strip().splitlines()
-        raise error(f"{path}: cannot be read as NetCDF ({type(e).__name__}{': ' + lines[0] if lines else ''})") from None
+        raise _with_code(error(f"{path}: cannot be read as NetCDF ({type(e).__name__}"
+                               f"{': ' + lines[0][:200] if lines else ''})"), 4) from None
+
+
+def _with_code(e: Exception, code: int) -> Exception:
+    try:
+        e.code = code
+    except AttributeError:  # pragma: no cover - an error type without attributes
+        pass
+    return e
+
+
+# the dimensions of every variable a run's result may hold (README, "Results"); a result that
+# holds one of these names with other dimensions is damaged
+RESULT_DIMS = {
+    "x": ("time", "granule"), "y": ("time", "granule"), "theta": ("time", "granule"),
+    "v_x": ("time", "granule"), "v_y": ("time", "granule"), "omega": ("time", "granule"),
+    "energy_solid": ("time",), "energy_solid_kinetic": ("time",), "energy_solid_potential": ("time",),
+    "dissipated_viscous": ("time",), "dissipated_friction": ("time",), "input_work": ("time",),
+    "balance_error": ("time",),
+    "contact_force_normal": ("time", "contact"), "contact_force_tangential": ("time", "contact"),
+    "wall_force_normal": ("time", "wall"), "wall_force_tangential": ("time", "wall"),
+    "step_size": ("time",), "iterations": ("time",), "lambda_max": ("time", "contact"),
+    "step_time": ("step",), "step_dt": ("step",), "step_iterations": ("step",), "step_lambda": ("step", "contact"),
+    "solid_time": ("solid_time",), "solid_eta": ("solid_time", "mode"), "solid_eta_dot": ("solid_time", "mode"),
+    "mode_omega": ("mode",), "solid_x": ("solid_time", "dof"), "solid_v": ("solid_time", "dof"),
+    "medium": ("granule",), "equilibrium_force": ("equilibrium_contact",),
+    "equilibrium_overlap": ("equilibrium_contact",),
+}
+# what every result holds, finite at every output
+RESULT_REQUIRED = ("x", "y", "theta", "v_x", "v_y", "omega", "energy_solid", "dissipated_viscous",
+                   "dissipated_friction", "input_work", "balance_error")
+
+
+def check_result_schema(ds, name) -> None:
+    """ResultFileError (code 2) unless `ds` has a result's structure: the scenario and version
+    attributes, every required variable with its dimensions and finite values, the known
+    optional ones with theirs, a time axis that increases, unique granule labels, the solid's
+    modal or reduced state complete, and one energy per medium."""
+    def bad(why):
+        return ResultFileError(f"{name}: {why}", 2)
+
+    if not isinstance(ds.attrs.get("scenario"), str) or "granel_version" not in ds.attrs:
+        raise bad("not a granel result (no scenario or granel_version attribute)")
+    missing = [v for v in RESULT_REQUIRED if v not in ds.variables]
+    if missing:
+        raise bad(f"not a granel result (no {', '.join(missing)})")
+    for v, dims in RESULT_DIMS.items():
+        if v in ds.variables and tuple(ds[v].dims) != dims:
+            raise bad(f"damaged result ({v} has dimensions {tuple(ds[v].dims)}, a result's are {dims})")
+    if ds.sizes.get("time", 0) < 1 or ds.sizes.get("granule", 0) < 1:
+        raise bad("damaged result (no output time or no granule)")
+    for v in RESULT_DIMS:
+        if v in ds.variables and ds[v].dtype.kind not in "fiu" and v != "medium":
+            raise bad(f"damaged result ({v} is not numeric: {ds[v].dtype})")
+    for v in RESULT_REQUIRED + ("time",):
+        values = np.asarray(ds[v].values, float)
+        if not np.all(np.isfinite(values)):
+            k = int(np.argmax(~np.isfinite(values).reshape(values.shape[0], -1).all(axis=1)))
+            raise bad(f"damaged result ({v} is not finite at output {k})")
+    t = np.asarray(ds["time"].values, float)
+    if np.any(np.diff(t) <= 0):
+        raise bad("damaged result (its output times do not increase)")
+    labels = [str(g) for g in ds["granule"].values]
+    if len(set(labels)) != len(labels):
+        raise bad("damaged result (a granule label repeats)")
+    for group in (("solid_eta", "solid_eta_dot", "mode_omega"), ("solid_x", "solid_v")):
+        present = [v for v in group if v in ds.variables]
+        if present and len(present) != len(group):
+            raise bad(f"damaged result ({', '.join(present)} without {', '.join(v for v in group if v not in present)})")
+    media = sorted({str(m) for m in ds["medium"].values}) if "medium" in ds.variables else []
+    absent = [m for m in media if f"energy_{m.lower()}" not in ds.variables]
+    if absent:
+        raise bad(f"damaged result (no energy_{absent[0].lower()} for the medium {absent[0]})")
 
 
 def read_netcdf(path: str | Path):

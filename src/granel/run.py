@@ -104,8 +104,11 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     """Solve a built problem and return its result Dataset (a `results.ResultSpec` with
     dataset=False: no xarray needed), after at most `max_wall` seconds of solving
     (`coupling.driver.WallTimeExceeded` beyond)."""
+    from .guard.fingerprints import encode
+
     solver = make_solver(problem, sparse)
-    fp = fingerprint(problem.source + problem.settings.method)
+    # what a checkpoint resumes: the scenario, the method and the contents of the files it reads
+    fp = fingerprint(problem.source + problem.settings.method + (encode(problem.inputs) if problem.inputs else ""))
     traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
     solid = problem.solid
     steps = traj.step_series("h")
@@ -113,6 +116,8 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     info = {**traj.solver, "steps": int(len(steps)), "min_step": float(steps.min()) if len(steps) else problem.settings.dt,
             "mean_iterations": float(its.mean()) if len(its) else 0.0, "max_iterations_used": int(its.max()) if len(its) else 0}
     attrs = base_attrs(problem.source, info)
+    if problem.inputs:
+        attrs["input_files"] = encode(problem.inputs)
     attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
     attrs.update(problem.equilibrium or {})
     omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
@@ -149,6 +154,53 @@ def built_models(sc: S.Scenario):
 def built_from_result(ds):
     """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
     return _built_from_text(ds.attrs["scenario"])
+
+
+def load_result(path, what: str = "result file"):
+    """A run's result file, read and checked: its structure (`results.check_result_schema`) and
+    its agreement with the scenario it carries (the same granules, contacts, walls and, for an
+    elastic solid, a modal or reduced state of the solid's size). ResultFileError naming the file:
+    code 4 if it cannot be read as NetCDF, 2 if it is not a result or is damaged."""
+    from pathlib import Path
+
+    from .results import ResultFileError, check_result_schema, read_netcdf_or
+
+    path = Path(path)
+    ds = read_netcdf_or(path, ResultFileError, what)
+    check_result_schema(ds, path)
+    check_result_model(ds, path)
+    return ds
+
+
+def check_result_model(ds, name) -> None:
+    """ResultFileError (code 2) unless the result's variables fit the model its scenario builds."""
+    from .results import ResultFileError, wall_names
+
+    try:
+        _, system, solid = built_from_result(ds)
+    except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
+        lines = str(e).strip().splitlines()
+        raise ResultFileError(f"{name}: its scenario attribute is not a valid granel scenario "
+                              f"({type(e).__name__}{': ' + lines[0][:200] if lines else ''})", 2) from None
+
+    def bad(why):
+        return ResultFileError(f"{name}: damaged result ({why})", 2)
+
+    labels = [str(g) for g in ds["granule"].values]
+    if labels != list(system.labels):
+        raise bad(f"{len(labels)} granules stored, its scenario has {system.n}")
+    if "contact" in ds.dims and [str(c) for c in ds["contact"].values] != [c.name for c in solid.contacts]:
+        raise bad(f"{ds.sizes['contact']} solid contacts stored, its scenario has {len(solid.contacts)}")
+    if "wall" in ds.dims and ds.sizes["wall"] != len(wall_names(system)):
+        raise bad(f"{ds.sizes['wall']} walls stored, its scenario has {len(system.walls)}")
+    if solid.ndof and "solid_time" in ds.dims:
+        if "mode" in ds.dims and ds.sizes["mode"] != solid.ndof:  # all modes: q = Phi eta
+            raise bad(f"{ds.sizes['mode']} modes stored for a solid of {solid.ndof} degrees of freedom")
+        if "dof" in ds.dims and ds.sizes["dof"] != solid.ndof:
+            raise bad(f"a reduced state of {ds.sizes['dof']} degrees of freedom for a solid of {solid.ndof}")
+        for v in ("solid_eta", "solid_eta_dot", "solid_x", "solid_v", "mode_omega"):
+            if v in ds.variables and not np.all(np.isfinite(ds[v].values)):
+                raise bad(f"{v} is not finite")
 
 
 def summarize(ds) -> dict:

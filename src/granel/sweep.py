@@ -33,7 +33,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import tomllib
 import traceback
 from pathlib import Path
 from typing import Any, Literal
@@ -44,6 +43,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from . import __version__
 from . import scenario as S
+from .results import ResultFileError
 from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
@@ -68,9 +68,9 @@ class SchedulerError(RuntimeError):
         self.code = code
 
 
-class SummaryFileError(ValueError):
-    """A file that cannot be read as a sweep summary (unreadable, truncated, not NetCDF, or a
-    NetCDF file of something else). The message names the file."""
+class SummaryFileError(ResultFileError):
+    """A file that cannot be used as a sweep summary; the message names the file. `code` 4:
+    it cannot be read as NetCDF; 2: a NetCDF file of something else, or damaged."""
 
 
 class AxisSpec(BaseModel):
@@ -187,17 +187,15 @@ class SweepSpec(CaseSpec):
 
 
 def load_sweep(path) -> tuple[SweepSpec, Path]:
+    """A sweep file -> (SweepSpec, its folder); any problem reading, parsing or validating it
+    names the file (and the line or field), with the reader's exit code."""
+    from .guard.reading import InputFileError, read_toml
+
     path = Path(path)
-    if not path.exists():
-        raise S.ScenarioError(f"sweep {path}: no such file")
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as e:
-        raise SweepFileError(f"sweep {path}: cannot read it as text ({e})") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise S.ScenarioError(f"sweep {path}: not valid TOML: {e}") from None
+        raw = read_toml(path, "sweep")
+    except InputFileError as e:
+        raise SweepFileError(str(e), e.code) from None
     try:
         spec = SweepSpec.model_validate(raw)
     except ValidationError as e:
@@ -234,6 +232,30 @@ def _base_path(spec: SweepSpec, base_dir: Path) -> str:
         return spec.base
     p = Path(spec.base)
     return str(p if p.is_absolute() else base_dir / p)
+
+
+def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
+    """The files a sweep's or a design's cases read: the base scenario (unless a built-in), and
+    every granule or load table it, its overrides or its axes name."""
+    out = []
+    base = _base_path(spec, base_dir)
+    if base not in S.builtin_names():
+        out.append(Path(base))
+    folder = Path(base).parent if base not in S.builtin_names() else base_dir
+    names = []
+    try:
+        raw, _ = S.load_raw(base)
+        raw = S.apply_overrides(raw, list(spec.overrides))
+        names += [m.get("granules_file") for m in raw.get("media", []) if isinstance(m, dict)]
+        names += [e.get("file") for e in raw.get("excitations", []) if isinstance(e, dict)]
+    except S.ScenarioError:
+        pass  # the base's own errors are reported by check_base
+    for axis in getattr(spec, "axes", []) or []:
+        fields = [axis.field] if axis.zip is None else list(axis.zip)
+        for f in fields:
+            if f and f.split(".")[-1] in ("granules_file", "file"):
+                names += [p[f] for p in axis.points() if f in p]
+    return out + [Path(n) if Path(n).is_absolute() else folder / n for n in names if isinstance(n, str) and n]
 
 
 def check_base(spec: CaseSpec, base_dir: Path) -> None:
@@ -273,8 +295,9 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
 
 def case_fingerprint(spec: CaseSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
     """What a case's cached result depends on: the full scenario text of each of its runs (with
-    every solver setting of its [simulation] table), the sweep's and the case's overrides, the
-    mode and the measurement pair, the granel version and the metric rules."""
+    every solver setting of its [simulation] table) and the contents of the files they read, the
+    sweep's and the case's overrides, the mode and the measurement pair, the granel version and
+    the metric rules."""
     payload = {
         "granel_version": __version__,
         "metric_rules": METRIC_RULES,
@@ -284,6 +307,7 @@ def case_fingerprint(spec: CaseSpec, scenarios: list[tuple[str, S.Scenario]], ca
         "sweep_overrides": list(spec.overrides),
         "case_overrides": case["overrides"],
         "scenarios": {key: S.to_toml(sc) for key, sc in scenarios},
+        "inputs": {key: S.input_digests(sc) for key, sc in scenarios if S.input_digests(sc)},
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=repr).encode()).hexdigest()
 
@@ -300,17 +324,22 @@ def _cached_case(done: Path, fp: str, case: dict) -> dict | None:
     return r
 
 
-def _cached_run(path: Path, text: str):
-    """A run's stored Dataset, if it holds the run of scenario `text` by this granel version."""
-    from .results import read_netcdf
+def _cached_run(path: Path, sc: S.Scenario):
+    """A run's stored Dataset, if it holds the run of scenario `sc` (its text and the contents of
+    the files it reads) by this granel version, and is a sound result."""
+    from .guard.fingerprints import decode
+    from .results import check_result_schema, read_netcdf
 
     if not path.exists():
         return None
     try:
         ds = read_netcdf(path)
-    except Exception:  # noqa: BLE001 - truncated, corrupt, foreign: run again
+        check_result_schema(ds, path)
+    except Exception:  # noqa: BLE001 - truncated, corrupt, foreign, damaged: run again
         return None
-    if ds.attrs.get("scenario") != text or ds.attrs.get("granel_version") != __version__:
+    if ds.attrs.get("scenario") != S.to_toml(sc) or ds.attrs.get("granel_version") != __version__:
+        return None
+    if decode(ds.attrs.get("input_files", "{}")) != S.input_digests(sc):
         return None
     return ds
 
@@ -367,7 +396,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
         runs = {}
         for key, sc in scenarios:
             path = out / f"{case['tag']}__{key}.nc"
-            ds = _cached_run(path, S.to_toml(sc)) if keep_runs else None
+            ds = _cached_run(path, sc) if keep_runs else None
             if ds is None:
                 ds = run_scenario(sc)
                 if keep_runs:
@@ -407,10 +436,10 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
         res["status"] = f"error: {type(e).__name__}: {e}"
         res["traceback"] = traceback.format_exc(limit=3)
     res["wall_s"] = time.perf_counter() - start
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = done.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(res, default=float))
-    tmp.replace(done)
+    from .guard.owners import MARK
+    from .guard.writing import write_text
+
+    write_text(done, json.dumps({"written_by": f"{MARK} {__version__}", **res}, default=float))
     return res
 
 
@@ -602,17 +631,17 @@ def read_summary(path) -> xr.Dataset:
     path = Path(path)
     ds = read_netcdf_or(path, SummaryFileError, "sweep summary file")
     if "sweep" not in ds.attrs or "status" not in ds:
-        raise SummaryFileError(f"{path}: not a granel sweep summary (no sweep description or status)")
+        raise SummaryFileError(f"{path}: not a granel sweep summary (no sweep description or status)", 2)
     try:
         spec = SweepSpec.model_validate_json(ds.attrs["sweep"])
     except (ValidationError, ValueError, TypeError):
-        raise SummaryFileError(f"{path}: not a granel sweep summary (its sweep description is invalid)") from None
+        raise SummaryFileError(f"{path}: not a granel sweep summary (its sweep description is invalid)", 2) from None
     dims = tuple(a.dim for a in spec.axes)
     shape = tuple(a.size for a in spec.axes)
     for name, v in ds.data_vars.items():
         if v.dims != dims or v.shape != shape:
             raise SummaryFileError(f"{path}: damaged sweep summary ({name} has dimensions {dict(v.sizes)}, "
-                                   f"the sweep's axes are {dict(zip(dims, shape))})")
+                                   f"the sweep's axes are {dict(zip(dims, shape))})", 2)
     return ds
 
 

@@ -123,6 +123,10 @@ def text_mark(comment: str = "#") -> str:
     return f"{comment} {MARK} {__version__}"
 
 
+# the picture formats whose files carry the mark (so that a rerun may replace them)
+PICTURE_FORMATS = ("png", "pdf", "svg", "eps", "ps", "jpg", "jpeg")
+
+
 def picture_metadata(suffix: str) -> dict:
     """Matplotlib's savefig metadata that carries the mark, for the picture format `suffix`."""
     from .. import __version__

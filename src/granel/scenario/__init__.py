@@ -21,6 +21,7 @@ from .files import (  # noqa: F401
     _format_validation_error,
     apply_overrides,
     builtin_names,
+    input_digests,
     load_raw,
     referenced_files,
     scenario_file,

@@ -361,7 +361,10 @@ def build_problem(sc: Scenario) -> Problem:
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)
     guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state, sc.simulation.duration)[1])
-    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report, table)
+    from .files import input_digests
+
+    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report, table,
+                   input_digests(sc))
 
 
 def equilibrate(system, state, solid):

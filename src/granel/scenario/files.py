@@ -31,7 +31,7 @@ def _format_validation_error(err: ValidationError) -> str:
         if len(shown) > 80:
             shown = shown[:77] + "..."
         lines.append(f"{loc} = {shown}: {msg}")
-    return "invalid scenario:\n  " + "\n  ".join(lines)
+    return "invalid scenario: " + "; ".join(lines)
 
 
 def builtin_names() -> list[str]:
@@ -121,18 +121,32 @@ def to_toml(sc: Scenario) -> str:
 
 
 
-def referenced_files(sc: Scenario) -> list[Path]:
-    """Every file the scenario reads besides itself (granule tables, load tables), as the run
-    opens them (relative to the scenario's folder)."""
+def _referenced(sc: Scenario) -> dict[str, Path]:
+    """{name as the scenario writes it: path as the run opens it} of every file it refers to."""
     names = [m.granules_file for m in sc.media if m.granules_file] + \
         [e.file for e in sc.excitations if e.kind == "table" and e.file]
-    out = []
+    out = {}
     for name in names:
         path = Path(name)
         if sc.base is not None and not path.is_absolute():
             path = sc.base / path
-        out.append(path)
+        out[name] = path
     return out
+
+
+def referenced_files(sc: Scenario) -> list[Path]:
+    """Every file the scenario reads besides itself (granule tables, load tables), as the run
+    opens them (relative to the scenario's folder)."""
+    return list(_referenced(sc).values())
+
+
+def input_digests(sc: Scenario) -> dict[str, str]:
+    """The contents' digests of every file the scenario refers to, by the names it gives them
+    (empty for a scenario that reads no other file): a run's, a sweep case's or a checkpoint's
+    fingerprint covers them, so that an edited table is never mixed with results of the old one."""
+    from ..guard.fingerprints import digests
+
+    return digests(_referenced(sc))
 
 
 def scenario_file(source: str | Path) -> Path | None:

@@ -1,0 +1,61 @@
+"""Fingerprints of what a command reads, by content: a resumed run, sweep or study compares the
+bytes of every input file, not only its name, so that an edited load table or granule file is
+never mixed with results computed from the old one."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+_MEMO: dict = {}
+
+
+def file_digest(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes (remembered per process by its size, time stamp and inode);
+    "missing" for a file that cannot be read."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        return "missing"
+    key = (str(path.absolute()), st.st_size, st.st_mtime_ns, st.st_ino)
+    hit = _MEMO.get(key)
+    if hit is not None:
+        return hit
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return "missing"
+    _MEMO[key] = digest = h.hexdigest()
+    return digest
+
+
+def digests(named: dict) -> dict:
+    """{name: digest} of {name: path}."""
+    return {name: file_digest(path) for name, path in named.items()}
+
+
+def text_digest(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def changed(held: dict, now: dict) -> list[str]:
+    """The names whose digest differs between two {name: digest} records (or is in one only)."""
+    return sorted(k for k in set(held) | set(now) if held.get(k) != now.get(k))
+
+
+def encode(record: dict) -> str:
+    return json.dumps(record, sort_keys=True)
+
+
+def decode(text) -> dict:
+    try:
+        out = json.loads(text) if isinstance(text, str) else {}
+    except ValueError:
+        return {}
+    return out if isinstance(out, dict) else {}
