@@ -104,7 +104,8 @@ def test_granule_csv_without_a_radius_column(tmp_path):
 
 @pytest.mark.parametrize("text, words", [
     ("0,0\n1e-5,nan\n", ["line 2", "finite"]),
-    ("0,0\n1e-5,abc\n", ["line 2", "not two numbers"]),
+    ("0,0\n1e-5,abc\n", ["line 2", "force", "not a number"]),
+    ("time,force,extra\n0,0,1\n1e-5,1,2\n", ["line 1", "time,force"]),
     ("0,0\n0,1\n", ["line 2", "does not increase"]),
     ("time,force\n0,0\n", ["two rows"]),
     ("0\n1e-5\n", ["line 1", "time,force"]),

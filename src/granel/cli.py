@@ -17,6 +17,7 @@ from rich.table import Table
 from . import __version__
 from . import scenario as S
 from .guard.commandline import GuardedGroup, error
+from .guard.owners import is_granel_file
 
 app = typer.Typer(cls=GuardedGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="granel: granular-elastic solid interface simulator")
@@ -60,9 +61,9 @@ def _shock_level(shock: str | None):
     return value
 
 
-def _load_or_fail(name: str, overrides: list[str], shock=None) -> S.Scenario:
+def _load_or_fail(name: str, overrides: list[str], shock=None, implied=()) -> S.Scenario:
     try:
-        return load_scenario(name, overrides, shock)
+        return load_scenario(name, overrides, shock, implied)
     except S.ScenarioError as e:
         _fail(str(e), e.code)
 
@@ -76,11 +77,14 @@ def _note_contact_defaults(sc: S.Scenario) -> None:
                       "alpha_n = 0.0 for frictionless, undamped contacts")
 
 
-def load_scenario(name: str, overrides: list[str], shock: str | float | None = None) -> S.Scenario:
+def load_scenario(name: str, overrides: list[str], shock: str | float | None = None, implied=()) -> S.Scenario:
     """A scenario with overrides; `shock` (a level name or a peak force [N]) replaces the first
-    excitation's `shock` and `fmax`."""
+    excitation's `shock` and `fmax`. An override of a field the run ignores is refused
+    (`scenario.usage`); `implied` overrides (set by a shortcut's meaning) are not checked."""
+    from .scenario.usage import check_overrides_used
+
     raw, base = S.load_raw(name)
-    raw = S.apply_overrides(raw, overrides)
+    raw = S.apply_overrides(raw, [*overrides, *implied])
     if shock is not None:
         if not raw.get("excitations"):
             raise S.ScenarioError("--shock: the scenario has no excitation to set")
@@ -88,7 +92,9 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
         exc.pop("fmax", None)
         exc.pop("shock", None)
         exc["shock" if isinstance(shock, str) else "fmax"] = shock
-    return S.validate(raw, base)
+    sc = S.validate(raw, base)
+    check_overrides_used(sc, overrides)
+    return sc
 
 
 def _input_and_output(source: Path, output: Path, what: str = "file") -> None:
@@ -166,6 +172,10 @@ def _check_run_paths(output: Path, sc, scenario: str, resume: Path | None, check
     plan.add_inputs(S.scenario_file(scenario), *S.referenced_files(sc), source)
     plan.file(output, "-o")
     plan.check()
+    from .guard.resources import check_disk
+    from .scenario.estimate import run_needs
+
+    check_disk(run_needs(sc).result * (2 if checkpoints else 1), output.absolute().parent, f"-o {output}: the result")
     ckpt = output.with_suffix(".ckpt")
     resuming = source is not None and source.exists() and source.resolve() == ckpt.resolve()
     if checkpoints and ckpt.exists() and not resuming:
@@ -205,12 +215,13 @@ def run(
     from .run import run_scenario, summarize
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
-    if dt:
-        ov.append("simulation.adaptive=false")  # --dt forces a fixed step
+    implied = []
+    if dt and solver != "paper":
+        implied.append("simulation.adaptive=false")  # --dt forces a fixed step
     if checkpoint_every:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
     wall_limit = _wall_seconds(max_wall, "--max-wall")
-    sc = _load_or_fail(scenario, ov, _shock_level(shock))
+    sc = _load_or_fail(scenario, ov, _shock_level(shock), implied)
     _note_contact_defaults(sc)
     ckpt = _check_run_paths(output, sc, scenario, resume, sc.simulation.checkpoint_every > 0)
     from .results import remove_stale_temporaries
@@ -387,7 +398,7 @@ def paper(
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
-    _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir())
+    _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir() and any((p / "runs").glob("*.nc")))
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1))
@@ -436,7 +447,13 @@ def reciprocity(
     scs = {exc: _load_or_fail(scenario, _overrides(solid, exc, duration, sets=set_), level) for exc in (b, a)}
     sc0 = next(iter(scs.values()))
     _check_folder(out, "--out", "reciprocity", inputs=(S.scenario_file(scenario), *S.referenced_files(sc0)),
-                  recognise=lambda p: any(p.glob("shock-*.nc")))
+                  recognise=lambda p: any(is_granel_file(f) for f in p.glob("shock-*.nc")), prepare=False)
+    from .guard.resources import check_disk
+    from .scenario.estimate import run_needs
+
+    check_disk(sum(run_needs(sc).result for sc in scs.values()), out, f"--out {out}: the two runs")
+    _check_folder(out, "--out", "reciprocity", inputs=(S.scenario_file(scenario), *S.referenced_files(sc0)),
+                  recognise=lambda p: any(is_granel_file(f) for f in p.glob("shock-*.nc")))
     runs = {}
     for exc, sc in scs.items():
         try:
@@ -597,7 +614,7 @@ def sweep(
     from .guard.outputs import OutputPlan
 
     plan = OutputPlan(inputs=[sweep_file, *sweep_inputs(spec, base_dir)])
-    plan.folder(out, "--out", "sweep", recognise=lambda p: (p / "cases").is_dir() or (p / "summary.nc").exists())
+    plan.folder(out, "--out", "sweep", recognise=lambda p: (p / "cases").is_dir() or is_granel_file(p / "summary.nc"))
     plan.file(out / "summary.nc", "--out (its summary.nc)")
     if spec.mode == "spectrum":
         for suffix in (".nc", ".png", ".md"):

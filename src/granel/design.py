@@ -452,8 +452,10 @@ def load_design(path) -> tuple[DesignSpec, Path]:
 def check_design(spec: DesignSpec, base_dir: Path) -> None:
     """Fail before anything runs (DesignFileError naming the variable) when a variable's field
     cannot take its bounds or choices in the base scenario (a typo, a field that is not a
-    scenario's, a value its schema refuses everywhere)."""
+    scenario's, a value its schema refuses everywhere), or when no run depends on it
+    (`check_variables_matter`, first: its reasons say more than a field check's)."""
     check_base(spec, base_dir)
+    check_variables_matter(spec, base_dir)
     if spec.mode == "spectrum":
         from .spectrum import FREQUENCY_FIELD
         from .sweep import AxisSpec, SweepSpec, check_spectrum
@@ -474,7 +476,6 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
             raise DesignFileError(f"variables.{k}.field = {var.field!r}{' (or a tied field)' if var.tied else ''}: the "
                                   "base scenario refuses it "
                                   f"({var.field} = {v!r}: {' '.join(msg.split())})")
-    check_variables_matter(spec, base_dir)
 
 
 # ---------------------------------------------------------------- variables that no run depends on
@@ -551,7 +552,7 @@ def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | Non
 
         ov[FREQUENCY_FIELD] = float(spec.frequencies[0])
     try:
-        runs = case_scenarios(spec, base_dir, {"index": [0], "overrides": ov, "tag": "probe"})
+        runs = case_scenarios(spec, base_dir, {"index": [0], "overrides": ov, "tag": "probe"}, check_usage=False)
         out = []
         for _, sc in runs:
             system, state, _ = build_granular(sc, sc.base)
@@ -884,7 +885,9 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     the best designs (`write_outputs`; the figures and report.md are
     `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best",
     "warnings"} (`design_warnings`)."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
+
+    from .guard.signals import local_cluster
 
     from .sweep import _connect
 
@@ -909,7 +912,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     start = time.monotonic()
     cluster = None
     if client is None:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     slots = max(1, len(client.scheduler_info()["workers"]))
     in_flight: dict = {}

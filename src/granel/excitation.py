@@ -177,37 +177,6 @@ def tabulated(times, values) -> LoadHistory:
     return LoadHistory("table", (), t, v)
 
 
-def read_force_csv(path) -> LoadHistory:
-    """A two-column CSV (time [s], force [N]); a header line and `#` comments are allowed. Every
-    value must be finite and the times strictly increasing; the error names the file and line."""
-    import csv
-
-    times, forces, first = [], [], True
-    with open(path, newline="") as fh:
-        for line, row in enumerate(csv.reader(fh), start=1):
-            if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
-                continue
-            where = f"{path}, line {line}"
-            header, first = first, False
-            if len(row) < 2:
-                raise ValueError(f"{where}: expected 'time,force', got {','.join(row)!r}")
-            try:
-                t, f = float(row[0]), float(row[1])
-            except ValueError:
-                if header:
-                    continue  # the first row may name the columns
-                raise ValueError(f"{where}: {','.join(row[:2])!r} is not two numbers") from None
-            if not (math.isfinite(t) and math.isfinite(f)):
-                raise ValueError(f"{where}: time and force must be finite, got {t!r}, {f!r}")
-            if times and t <= times[-1]:
-                raise ValueError(f"{where}: time {t!r} does not increase (previous {times[-1]!r})")
-            times.append(t)
-            forces.append(f)
-    if len(times) < 2:
-        raise ValueError(f"{path}: need at least two rows of 'time,force'")
-    return tabulated(np.array(times), np.array(forces))
-
-
 def force_value(kind: int, params: np.ndarray, times: np.ndarray, values: np.ndarray, t: float) -> float:
     """Reference (pure Python) evaluation; the compiled twin lives in granular.kernels."""
     if kind == KIND_HALF_SINE:

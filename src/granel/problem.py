@@ -28,3 +28,4 @@ class Problem:
     equilibrium: dict | None = None  # the static equilibrium's numbers (granular.static.Equilibrium.summary)
     equilibrium_contacts: tuple | None = None  # its loaded contacts: names, forces, overlaps (Equilibrium.contacts)
     inputs: dict = field(default_factory=dict)  # {file name: content digest} of the files the scenario reads
+    input_texts: dict = field(default_factory=dict)  # {file name: its text}: the result carries its whole model

@@ -7,6 +7,7 @@ imported lazily here for that reason)."""
 
 from __future__ import annotations
 
+import io
 import sys
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -48,9 +49,10 @@ def write_netcdf(ds, path: str | Path) -> Path:
     if "granel_version" not in ds.attrs:
         ds = ds.copy(deep=False)
         ds.attrs["granel_version"] = __version__
-    with atomic_path(path) as tmp, _synchronous_dask():
-        ds.to_netcdf(tmp, engine="h5netcdf", invalid_netcdf=False)
-    return Path(path)
+    buffer = io.BytesIO()
+    with _synchronous_dask():
+        ds.to_netcdf(buffer, engine="h5netcdf", invalid_netcdf=False)
+    return _netcdf_to(path, buffer)
 
 
 @contextmanager
@@ -206,7 +208,8 @@ def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
     coords, data = list(entries(spec.coords)), list(entries(spec.data))
     index = {name for name, dims, _, _ in coords if dims == (name,)}
     aux = [(name, dims) for name, dims, _, _ in coords if name not in index]
-    with atomic_path(path) as tmp, h5netcdf.File(tmp, "w") as f:
+    buffer = io.BytesIO()  # HDF5 writes into memory; the disk sees one plain, atomic write (`_netcdf_to`)
+    with h5netcdf.File(buffer, "w") as f:
         for _, dims, values, _ in coords + data:
             for dim, size in zip(dims, values.shape):
                 if dim not in f.dimensions:
@@ -227,7 +230,16 @@ def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
             if names:
                 v.attrs["coordinates"] = " ".join(names)
         f.attrs.update(spec.attrs)
-    return Path(path)
+    return _netcdf_to(path, buffer)
+
+
+def _netcdf_to(path, buffer: io.BytesIO) -> Path:
+    """A NetCDF file built in memory to `path`, atomically and synced. HDF5 never writes to the
+    disk itself: a full disk is then one clean OSError of a plain write (exit 4, no partial
+    file), never a failure inside HDF5, which can crash the process as it closes."""
+    from .guard.writing import write_bytes
+
+    return write_bytes(path, buffer.getbuffer())
 
 
 def base_attrs(scenario_toml: str, solver: dict) -> dict:

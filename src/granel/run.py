@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import tomllib
+from pathlib import Path
 from dataclasses import replace
 
 import numpy as np
@@ -118,6 +119,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     attrs = base_attrs(problem.source, info)
     if problem.inputs:
         attrs["input_files"] = encode(problem.inputs)
+        attrs["input_texts"] = encode(problem.input_texts)
     attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
     attrs.update(problem.equilibrium or {})
     omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
@@ -139,8 +141,24 @@ def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, ma
 
 
 @functools.lru_cache(maxsize=8)
-def _built_from_text(scenario_toml: str):
-    sc = S.validate(tomllib.loads(scenario_toml))
+def _built_from_text(scenario_toml: str, texts_json: str = "{}"):
+    """(Scenario, GranularSystem, SolidModel) of a stored scenario, with the texts of the files it
+    refers to (a result's `input_texts`) written to a private folder, so that it rebuilds
+    wherever the result is read."""
+    import tempfile
+
+    from .guard.fingerprints import decode
+
+    raw = tomllib.loads(scenario_toml)
+    texts = decode(texts_json)
+    if texts:
+        import atexit
+        import shutil
+
+        folder = Path(tempfile.mkdtemp(prefix="granel-inputs-"))
+        atexit.register(shutil.rmtree, folder, True)
+        raw = S.with_input_texts(raw, texts, folder)
+    sc = S.validate(raw)
     problem = S.build_problem(sc)
     return sc, problem.system, problem.solid
 
@@ -153,7 +171,7 @@ def built_models(sc: S.Scenario):
 
 def built_from_result(ds):
     """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
-    return _built_from_text(ds.attrs["scenario"])
+    return _built_from_text(ds.attrs["scenario"], str(ds.attrs.get("input_texts", "{}")))
 
 
 def load_result(path, what: str = "result file"):

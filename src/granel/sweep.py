@@ -17,9 +17,11 @@ A sweep file (TOML):
     values = ["plate", "beam"]
     [[axes]]                             # zipped fields that vary together: one dimension
     name = "load"
-    zip = { "excitations.0.kind" = ["half_sine", "burst"], "excitations.0.frequency" = [1.0, 2e4] }
+    zip = { "excitations.0.kind" = ["half_sine", "burst"], "excitations.0.frequency" = ["-", 2e4] }
 
-Cases are the Cartesian product of the axes (at most MAX_CASES).
+Cases are the Cartesian product of the axes (at most MAX_CASES). A value "-" leaves its field as
+the base has it (a zipped field that one case's load does not use: an override of a field the run
+ignores is refused, `scenario.usage`).
 
 Resume: a finished case leaves `cases/<tag>.json` (its metrics or its error) and one NetCDF per
 run. A rerun reuses a case's metrics only if it finished ok and its fingerprint matches (see
@@ -214,6 +216,15 @@ def _literal(v) -> str:
     return repr(float(v)) if isinstance(v, float) else str(v)
 
 
+# an axis value that leaves its field as the base has it (a zipped field that one case does not use)
+UNSET = "-"
+
+
+def case_overrides(case: dict) -> list[str]:
+    """A case's `key=value` overrides (a value of "-" sets nothing)."""
+    return [f"{k}={_literal(v)}" for k, v in case["overrides"].items() if not (isinstance(v, str) and v == UNSET)]
+
+
 def cases(spec: SweepSpec) -> list[dict]:
     """Every case: its index tuple and the overrides it applies."""
     pts = [a.points() for a in spec.axes]
@@ -280,7 +291,7 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
         raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: the same granule as spectrum.drive; both directions "
                               "need two granules")
     first = cases(spec)[0]
-    ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in first["overrides"].items()]
+    ov = list(spec.overrides) + case_overrides(first)
     f = float(first["overrides"][FREQUENCY_FIELD])
     for _, driven, _ in sp.runs():
         try:
@@ -344,21 +355,21 @@ def _cached_run(path: Path, sc: S.Scenario):
     return ds
 
 
-def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict) -> list[tuple[str, S.Scenario]]:
+def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict, check_usage: bool = True) -> list[tuple[str, S.Scenario]]:
     """The scenario(s) of one case: two (both directions) in reciprocity mode."""
-    ov = list(spec.overrides) + [f"{k}={_literal(v)}" for k, v in case["overrides"].items()]
+    ov = list(spec.overrides) + case_overrides(case)
     base = _base_path(spec, base_dir)
     if spec.mode == "run":
-        return [("run", S.load(base, ov))]
+        return [("run", S.load(base, ov, check_usage))]
     if spec.mode == "spectrum":
         f = float(case["overrides"][FREQUENCY_FIELD])
         if not (np.isfinite(f) and f > 0):
             raise S.ScenarioError(f"{FREQUENCY_FIELD}: a drive frequency must be positive, got {f!r}")
-        return [(d, S.load(base, ov + spec.spectrum.overrides(f, driven))) for d, driven, _ in spec.spectrum.runs()]
+        return [(d, S.load(base, ov + spec.spectrum.overrides(f, driven), check_usage)) for d, driven, _ in spec.spectrum.runs()]
     a, b = spec.pair
     out = []
     for exc in (b, a):  # forward: shock on b measured at a; backward: the reverse
-        out.append((f"shock-{exc.replace(':', '')}", S.load(base, ov + [f'excitations.0.granule="{exc}"'])))
+        out.append((f"shock-{exc.replace(':', '')}", S.load(base, ov + [f'excitations.0.granule="{exc}"'], check_usage)))
     return out
 
 
@@ -573,7 +584,9 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     worker within `timeout` seconds); reuses cases already finished in out_dir (see `run_case`).
     A case whose task fails (e.g. its worker dies) is recorded as failed; an OSError (out_dir not
     writable) propagates. Writes out_dir/summary.nc and returns it."""
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
+
+    from .guard.signals import local_cluster
 
     from .results import write_netcdf
 
@@ -588,7 +601,7 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     if scheduler:
         client = _connect(scheduler, timeout)
     else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     results = []
     try:

@@ -27,7 +27,7 @@ except ImportError:  # pragma: no cover - older typer uses click itself
 
 Exit, Abort = typer.Exit, typer.Abort
 
-from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, Terminated, exit_code, is_no_space
+from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, GranelError, Terminated, exit_code, is_no_space
 from .signals import stops_as_exceptions
 
 console = Console(stderr=True, soft_wrap=True)
@@ -101,12 +101,14 @@ def exit_for(e: BaseException) -> int:
     elif isinstance(e, MemoryError):
         error("out of memory: the request needs more memory than this machine could give (lower the outputs' size or "
               "the number of granules or modes)")
-    elif is_no_space(e) and not str(e).endswith("written there"):
+    elif isinstance(e, GranelError):
+        error(str(e))
+    elif is_no_space(e):
         name = getattr(e, "filename", None)
-        error(f"{name + ': ' if name else ''}no space left on the device")
-    elif isinstance(e, OSError) and not hasattr(e, "code"):
+        error(f"{str(name) + ': ' if name else ''}no space left on the device; nothing was written there")
+    elif isinstance(e, OSError):
         name = getattr(e, "filename", None)
-        error(f"{name + ': ' if name else ''}{e.strerror or e}")
+        error(f"{str(name) + ': ' if name else ''}{e.strerror or e}")
     else:
         error(str(e))
     return code

@@ -116,7 +116,7 @@ def read_csv(path: str | Path, what: str, required: tuple[str, ...], optional: t
                 _check_header(header, where, line, required, optional)
                 continue
             if len(row) != len(header):
-                raise InputFileError(f"{where}, line {line}: {len(row)} fields, the header has {len(header)} "
+                raise InputFileError(f"{where}, line {line}: {len(row)} columns, the header names {len(header)} "
                                      f"({','.join(header)})", USAGE)
             rows.append({"__line__": line, **{k: v.strip() for k, v in zip(header, row)}})
     except csv.Error as e:

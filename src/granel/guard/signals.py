@@ -61,3 +61,18 @@ def worker_setup() -> None:
 
 def dask_setup(worker=None):  # dask's preload hook: `distributed.worker.preload` names this module
     worker_setup()
+
+
+def local_cluster(workers: int):
+    """A LocalCluster of `workers` single-thread processes whose workers run `worker_setup`
+    (ignore the terminal's Ctrl-C, quiet logs), with the parent's dask logging quiet too."""
+    from dask.distributed import LocalCluster
+
+    quiet_dask()
+    return LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True, dashboard_address=None,
+                        preload=["granel.guard.signals"], silence_logs=logging.CRITICAL)
+
+
+def pool_initializer() -> None:
+    """A process pool's initializer (movies, the paper's reference run): as `worker_setup`."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

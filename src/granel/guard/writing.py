@@ -95,6 +95,7 @@ def atomic_path(path: str | Path, check: bool = True, keep_suffix: bool = False)
         raise
     try:
         yield tmp
+        _set_mode(tmp, target)
         fsync_path(tmp)
         why = replace_refusal(target) if check else None
         if why:
@@ -109,6 +110,21 @@ def atomic_path(path: str | Path, check: bool = True, keep_suffix: bool = False)
         if isinstance(e, Exception) and is_no_space(e):
             raise no_space(target, e) from None
         raise
+
+
+def _set_mode(tmp: str, target: Path) -> None:
+    """The temporary's permissions as the file would have had: the replaced file's, else the
+    default for a new file (0666 less the umask), not mkstemp's private 0600."""
+    try:
+        mode = os.stat(target).st_mode & 0o7777
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    try:
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
 
 
 def write_text(path: str | Path, text: str, check: bool = True) -> Path:

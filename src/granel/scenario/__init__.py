@@ -22,10 +22,12 @@ from .files import (  # noqa: F401
     apply_overrides,
     builtin_names,
     input_digests,
+    input_texts,
     load_raw,
     referenced_files,
     scenario_file,
     to_toml,
+    with_input_texts,
 )
 from .schema import (  # noqa: F401
     ContactSpec,
@@ -52,7 +54,14 @@ def validate(raw: dict, base: Path | None = None) -> Scenario:
     return sc
 
 
-def load(source: str | Path, overrides: list[str] | None = None) -> Scenario:
-    """A built-in name or a TOML file, with `key.path=value` overrides, validated."""
+def load(source: str | Path, overrides: list[str] | None = None, check_usage: bool = True) -> Scenario:
+    """A built-in name or a TOML file, with `key.path=value` overrides, validated; an override
+    of a field the run ignores is refused (`usage.check_overrides_used`) unless `check_usage` is
+    false (a design's probe of what its variables change)."""
+    from .usage import check_overrides_used
+
     raw, base = load_raw(source)
-    return validate(apply_overrides(raw, overrides or []), base)
+    sc = validate(apply_overrides(raw, overrides or []), base)
+    if check_usage:
+        check_overrides_used(sc, overrides)
+    return sc

@@ -11,14 +11,15 @@ import numpy as np
 
 from ..coupling.driver import Guards, Schedule
 from ..coupling.solver import SolverSettings
-from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table, read_granules_csv
-from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, close_pairs, initial_state, load_scales
+from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table
+from ..guard.reading import InputFileError
+from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state, load_scales
 from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
 from ..solid.beam import build_beam
 from ..solid.plate import LayerSpec, PlateMesh, build_plate
-from .files import to_toml
+from .files import read_granules_table, to_toml
 from .schema import ExcitationSpec, Scenario, ScenarioError
 
 # Hertz impact: contact duration = HERTZ_DURATION * delta_max / v = 2 (2/5) B(2/5, 1/2) delta_max / v
@@ -40,9 +41,12 @@ def build_media(sc: Scenario, base: Path | None = None):
             if base is not None and not path.is_absolute():
                 path = base / path
             try:
-                rows = read_granules_csv(path)
+                rows = read_granules_table(path)
+            except InputFileError as e:
+                raise ScenarioError(f"media.{k}.granules_file: {e}", e.code) from None
+            try:
                 med = medium_from_table(m.name, rows, mat, m.side, {k: v.material() for k, v in sc.materials.items()})
-            except (OSError, ValueError, KeyError) as e:
+            except (ValueError, KeyError) as e:
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: {e}") from None
             if np.any(med.radius <= 0):
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: radius must be positive")
@@ -119,6 +123,8 @@ def build_granular(sc: Scenario, base: Path | None = None):
             raise ScenarioError(f"excitations.{k}.granule = {e.granule!r}: no such granule (e.g. {labels[0]!r})")
         try:
             hist = e.history(base)
+        except InputFileError as err:
+            raise ScenarioError(f"excitations.{k}.file: {err}", err.code) from None
         except (OSError, ValueError) as err:
             raise ScenarioError(f"excitations.{k}.file = {e.file!r}: {err}") from None
         exc.append(Excitation(labels.index(e.granule), excitation_direction(e, side_of[e.granule]), hist))
@@ -176,30 +182,16 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
 
 def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     """Whole-scenario checks that need the built geometry; the built system is kept on the
-    scenario for `build_problem`."""
+    scenario for `build_problem`. The run's needs are estimated first (`estimate.check_needs`),
+    and again with the built granule count."""
+    from .estimate import check_needs
+
+    check_needs(sc)
     system, state, media = build_granular(sc, base)
+    if any(m.granules_file for m in sc.media):
+        check_needs(sc, system.n)
     sc._built = (to_toml(sc), system, state, media)
-    # overlapping granules
-    pos, R = system.pos0, system.radius
-    if system.n > 1:
-        pairs = close_pairs(pos, 2 * R.max())
-        if len(pairs):
-            i, j = pairs[:, 0], pairs[:, 1]
-            over = R[i] + R[j] - np.hypot(*(pos[j] - pos[i]).T)
-            bad = over > 1e-9 * np.minimum(R[i], R[j])
-            if bad.any():
-                k = int(np.argmax(over))
-                raise ScenarioError(
-                    f"media: granules {system.labels[i[k]]} and {system.labels[j[k]]} overlap by {over[k]:.3e} m "
-                    "(initial states must be free of compression)"
-                )
-    if present_solid(sc) is not None:
-        s = sc.solid
-        inside = (pos[:, 0] + R > s.x0 + 1e-12) & (pos[:, 0] - R < s.x0 + s.width - 1e-12) & \
-                 (pos[:, 1] > s.y0) & (pos[:, 1] < s.y0 + s.length)
-        if inside.any():
-            g = int(np.flatnonzero(inside)[0])
-            raise ScenarioError(f"media: granule {system.labels[g]} overlaps the solid at x = {pos[g, 0]:.4g} m")
+    check_geometry(sc, system)
     check_load_overlaps(sc, system)
     check_contact_rates(sc, system)
     speed = max((math.hypot(*iv.v) for iv in sc.initial_velocities), default=0.0)
@@ -211,6 +203,27 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
             "(1/20 of the shortest expected Hertz collision, 1/10 of the pulse)"
         )
     check_times(sc.simulation)
+
+
+def check_geometry(sc: Scenario, system) -> None:
+    """No granule starts pressed into another, a wall or the solid (faces and ends), however its
+    medium was built (`granular.geometry.initial_overlaps`)."""
+    from ..granular.geometry import initial_overlaps
+
+    s = present_solid(sc)
+    box = None if s is None else (s.x0, s.y0, s.x0 + s.width, s.y0 + s.length)
+    limit = sc.simulation.overlap_limit
+    for o in initial_overlaps(system, box, limit):
+        R = float(system.radius[list(system.labels).index(o.granule)])
+        what = {"granules": f"granules {o.granule} and {o.other} overlap",
+                "wall": f"granule {o.granule} overlaps the wall {o.other!r}",
+                "solid": f"granule {o.granule} overlaps the solid"}[o.kind]
+        why = {"granules": "granules must start free of compression (simulation.equilibrate finds a precompressed "
+                           "start)",
+               "wall": f"beyond the contact law's range (simulation.overlap_limit = {limit:g} of the radius)",
+               "solid": "where no contact with the solid acts (its ends or inside), or beyond the face contact's range "
+                        f"(simulation.overlap_limit = {limit:g})"}[o.kind]
+        raise ScenarioError(f"media: {what} by {o.depth:.3e} m ({o.depth / R:.2%} of its radius): {why}")
 
 
 def _wall_hertz(system, g) -> float:
@@ -361,10 +374,10 @@ def build_problem(sc: Scenario) -> Problem:
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)
     guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state, sc.simulation.duration)[1])
-    from .files import input_digests
+    from .files import input_digests, input_texts
 
     return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report, table,
-                   input_digests(sc))
+                   input_digests(sc), input_texts(sc))
 
 
 def equilibrate(system, state, solid):

@@ -134,6 +134,32 @@ def _referenced(sc: Scenario) -> dict[str, Path]:
     return out
 
 
+def input_texts(sc: Scenario) -> dict[str, str]:
+    """The text of every file the scenario refers to, by the names it gives them: a result
+    stores them so that it carries its whole model (`with_input_texts` rebuilds it anywhere)."""
+    from ..guard.reading import read_text
+
+    return {name: read_text(path, "file") for name, path in _referenced(sc).items()}
+
+
+def with_input_texts(raw: dict, texts: dict[str, str], folder: Path) -> dict:
+    """`raw` with each referenced file that `texts` holds written into `folder` and named there
+    (absolute), so that a stored scenario validates wherever its result is read."""
+    import hashlib
+
+    out = copy.deepcopy(raw)
+    places = [(m, "granules_file") for m in out.get("media", []) if isinstance(m, dict)] + \
+        [(e, "file") for e in out.get("excitations", []) if isinstance(e, dict)]
+    for table, key in places:
+        name = table.get(key)
+        if isinstance(name, str) and name in texts:
+            path = folder / f"{hashlib.sha1(name.encode()).hexdigest()[:12]}-{Path(name).name}"
+            if not path.exists():
+                path.write_text(texts[name])
+            table[key] = str(path)
+    return out
+
+
 def referenced_files(sc: Scenario) -> list[Path]:
     """Every file the scenario reads besides itself (granule tables, load tables), as the run
     opens them (relative to the scenario's folder)."""
@@ -152,3 +178,71 @@ def input_digests(sc: Scenario) -> dict[str, str]:
 def scenario_file(source: str | Path) -> Path | None:
     """The file a scenario source names (None for a built-in name)."""
     return None if str(source) in builtin_names() else Path(source)
+
+
+GRANULE_COLUMNS, GRANULE_OPTIONAL = ("label", "x", "y", "radius"), ("material",)
+
+
+def read_granules_table(path: Path) -> list[dict]:
+    """A granule table (CSV with a header: label, x, y, radius[, material]), read by the one
+    reader (`guard.reading.read_csv`: an unknown or misspelt column is an error). Every value is
+    checked: a non-empty label, unique in the file, finite x and y, a finite positive radius;
+    the error names the file, the line and the column."""
+    from ..guard.reading import InputFileError, number, read_csv
+
+    rows, seen = [], {}
+    for r in read_csv(path, "granules_file", GRANULE_COLUMNS, GRANULE_OPTIONAL):
+        line = r["__line__"]
+        where = f"granules_file {path}, line {line}"
+        label = r["label"]
+        if not label:
+            raise InputFileError(f"{where}: empty label")
+        if label in seen:
+            raise InputFileError(f"{where}: label {label!r} repeats line {seen[label]}")
+        seen[label] = line
+        rows.append({"label": label, "material": r.get("material", ""), "x": number(r["x"], where, "x"),
+                     "y": number(r["y"], where, "y"), "radius": number(r["radius"], where, "radius", positive=True)})
+    if not rows:
+        raise InputFileError(f"granules_file {path}: no granules (a row per granule after the header)")
+    return rows
+
+
+def read_load_table(path: Path):
+    """A load table (CSV: time [s], force [N]; a header line naming the columns `time,force` is
+    optional, `#` comments are allowed), read by the one reader. Every value is finite, the
+    times strictly increase, at least two rows; errors name the file and the line."""
+    import numpy as np
+
+    from ..excitation import tabulated
+    from ..guard.reading import InputFileError, number, read_text
+
+    text = read_text(path, "load table")
+    times, forces, first = [], [], True
+    import csv
+    import io
+
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        for row in reader:
+            line = reader.line_num
+            if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+                continue
+            where = f"load table {path}, line {line}"
+            header, first = first, False
+            cells = [c.strip() for c in row]
+            if header and len(cells) == 2 and cells[0].lower().startswith("time") and cells[1].lower().startswith("force"):
+                continue  # the header, units allowed: time [s],force [N]
+            if header and any(c[:1].isalpha() and c.lower() not in ("nan", "inf", "-inf", "infinity") for c in cells):
+                raise InputFileError(f"{where}: the header must name the columns time,force, got {','.join(cells)!r}")
+            if len(cells) != 2:
+                raise InputFileError(f"{where}: expected two columns 'time,force', got {len(cells)} ({','.join(cells)!r})")
+            t, f = number(cells[0], where, "time"), number(cells[1], where, "force")
+            if times and t <= times[-1]:
+                raise InputFileError(f"{where}: time {t!r} does not increase (previous {times[-1]!r})")
+            times.append(t)
+            forces.append(f)
+    except csv.Error as e:
+        raise InputFileError(f"load table {path}, line {reader.line_num}: not valid CSV ({e})") from None
+    if len(times) < 2:
+        raise InputFileError(f"load table {path}: need at least two rows of 'time,force'")
+    return tabulated(np.array(times), np.array(forces))

@@ -10,8 +10,7 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 from pydantic.fields import FieldInfo
 
-from ..excitation import (PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst,
-                          read_force_csv)
+from ..excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst
 from ..guard.exits import InputError
 from ..materials import Material
 from ..units import parse_time
@@ -406,10 +405,12 @@ class ExcitationSpec(_Strict):
             return harmonic(self.amplitude, self.frequency, self.t0, self.duration or math.inf, self.phase, self.ramp_cycles)
         if self.kind == "chirp":
             return chirp(self.amplitude, self.f0, self.f1, self.duration, self.t0, self.mode, self.ramp_cycles)
+        from .files import read_load_table
+
         path = Path(self.file)
         if base is not None and not path.is_absolute():
             path = base / path
-        return read_force_csv(path)
+        return read_load_table(path)
 
 
 class InitialVelocitySpec(_Strict):

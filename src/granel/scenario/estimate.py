@@ -1,0 +1,92 @@
+"""What a run will need, estimated from its scenario before anything is built (`run_needs`), so
+that a mistyped count or duration is refused with its estimate (`guard.resources`) instead of
+ending in a MemoryError, a swap storm or a disk full of a partial result.
+
+The model counts what granel keeps in memory: each granule's arrays and contact lists, the state
+of every output (six numbers a granule, held twice: while running and in the result), every
+accepted step's record (a fixed step's count is exact; an adaptive run takes at least
+duration / max_step), the solid's assembled matrices and, up to `solid.modal.DENSE_LIMIT`
+degrees of freedom, its dense eigen-solution and the modal state of every solid output."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .schema import Scenario
+
+BYTES_PER_GRANULE = 2048  # arrays, neighbour and wall candidates, labels
+BYTES_PER_GRANULE_OUTPUT = 2 * 6 * 8  # x, y, theta, v_x, v_y, omega in float64, twice
+BYTES_PER_ELEMENT = 6 * 1024  # a Q8 element's 16 x 16 blocks of K and M in COO form
+DENSE_LIMIT = 8000  # solid.modal.DENSE_LIMIT: all modes by a dense solver up to this many DOFs
+RESULT_OVERHEAD = 128 * 1024  # a result file's HDF5 headers, coordinates and attributes
+
+
+@dataclass(frozen=True)
+class Needs:
+    granules: int
+    outputs: int
+    steps: int  # accepted steps recorded (a lower bound for adaptive runs)
+    solid_dofs: int
+    memory: float  # bytes
+    result: float  # bytes of the result file
+
+    def describe(self) -> str:
+        parts = [f"{self.granules:,} granules", f"{self.outputs:,} outputs", f"{self.steps:,} steps"]
+        if self.solid_dofs:
+            parts.append(f"a solid of about {self.solid_dofs:,} degrees of freedom")
+        return ", ".join(parts)
+
+
+def granule_count(sc: Scenario) -> int:
+    """Granules of the hexagonal media and chains (granule tables count once read: 0 here)."""
+    n = 0
+    for m in sc.media:
+        if m.radii is not None:
+            n += len(m.radii)
+        elif m.columns is not None:
+            n += sum(m.columns)
+    return n
+
+
+def solid_dofs(sc: Scenario) -> tuple[int, int]:
+    """(degrees of freedom, elements) of the scenario's solid, at least: a plate's rows of
+    elements are at least length / mesh.max_size (`solid.plate.plate_mesh`), Q8 nodes
+    (2 nx + 1)(2 ny + 1) - nx ny with two DOFs each; a beam's 2 (elements + 1)."""
+    s = sc.solid
+    if s is None or s.kind in ("rigid", "none"):
+        return 0, 0
+    if s.kind == "beam":
+        return 2 * (s.beam_elements + 1), s.beam_elements
+    nx = s.mesh.nx
+    ny = max(2, math.ceil(s.length / s.mesh.max_size))
+    return 2 * ((2 * nx + 1) * (2 * ny + 1) - nx * ny), nx * ny
+
+
+def run_needs(sc: Scenario, granules: int | None = None) -> Needs:
+    """The memory and result size of a run of `sc` (`granules`: the built count, if known)."""
+    sim = sc.simulation
+    n = granule_count(sc) if granules is None else granules
+    outputs = int(min(sim.duration / sim.output_every, 1e18)) + 1
+    fixed = not (sim.solver == "fast" and sim.integrator == "exact" and sim.adaptive)
+    steps = int(min(sim.duration / (sim.dt if fixed else sim.max_step), 1e18))
+    ndof, nel = solid_dofs(sc)
+    contacts = sum(m.columns[0] if m.columns else 1 for m in sc.media if m.side != "none") if ndof else 0
+    solid_every = sim.solid_output_every or sim.output_every
+    solid_outputs = int(min(sim.duration / solid_every, 1e18)) + 1 if ndof else 0
+    modal = ndof if ndof <= DENSE_LIMIT else 0
+    memory = (n * BYTES_PER_GRANULE + outputs * n * BYTES_PER_GRANULE_OUTPUT + steps * 2 * (4 + contacts) * 8
+              + nel * BYTES_PER_ELEMENT + 3.0 * modal * modal * 8 + solid_outputs * max(modal, ndof) * 2 * (8 + 4))
+    result = RESULT_OVERHEAD + outputs * (n * 6 * 8 + 16 * 8) + steps * (4 + contacts) * 8 + solid_outputs * max(modal, ndof) * 2 * 4
+    return Needs(n, outputs, steps, ndof, float(memory), float(result))
+
+
+def check_needs(sc: Scenario, granules: int | None = None) -> Needs:
+    """ResourceError (exit 2) when a run of `sc` needs more memory than this process may use."""
+    from ..guard.resources import check_memory
+
+    needs = run_needs(sc, granules)
+    check_memory(needs.memory, f"this run ({needs.describe()})",
+                 "lower the counts (media columns, solid mesh), simulation.duration, or store fewer outputs "
+                 "(simulation.output_every, simulation.solid_output_every); GRANEL_MAX_MEMORY sets the limit")
+    return needs
