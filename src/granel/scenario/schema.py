@@ -108,6 +108,13 @@ class SimulationSpec(_Strict):
             raise ValueError(f"must be a positive time, got {v!r}")
         return v
 
+    @field_validator("checkpoint_every", "solid_output_every")
+    @classmethod
+    def _zero_or_positive(cls, v):
+        if not v >= 0 or not math.isfinite(v):
+            raise ValueError(f"must be a time >= 0 (0: none, or every output), got {v!r}")
+        return v
+
 
 class ContactSpec(_Strict):
     mu: float = Field(0.099, ge=0, le=10, description="Coulomb friction coefficient, eq. (5) (the paper's 0.099)")
