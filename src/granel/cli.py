@@ -401,7 +401,8 @@ def paper(
     _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir() and any((p / "runs").glob("*.nc")))
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
-        task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1))
+        # the twelve cases, their free-edge reruns and the six LSGM-shocked ones without the SSGM's outer wall
+        task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1) + (len(CASES) // 2 if free_edge else 0))
 
         def progress(what, info):
             if isinstance(what, tuple):
@@ -415,11 +416,11 @@ def paper(
             _fail(str(e))
     t = Table("#", "statement", "paper", "granel", "verdict", title="granel vs the paper", show_lines=False)
     for k, c in enumerate(res["claims"], 1):
-        color = "green" if c["verdict"] == "agree" else "yellow"
+        color = {"agree": "green", "by construction": "cyan"}.get(c["verdict"], "yellow")
         t.add_row(str(k), c["claim"], c["paper"], c["granel"], f"[{color}]{c['verdict']}[/]")
     Console().print(t)
-    agree = sum(c["verdict"] == "agree" for c in res["claims"])
-    console.print(f"{agree}/{len(res['claims'])} statements agree; report: {res['report']}; total {res['total_s']:.1f} s")
+    # agreement counted only over the statements that could have failed (granel.claims.tally)
+    console.print(f"{res['summary']}; report: {res['report']}; total {res['total_s']:.1f} s")
 
 
 @app.command()

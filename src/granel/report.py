@@ -9,10 +9,13 @@ import time
 from pathlib import Path
 
 from . import scenario as S
-from .claims import CASES, SHOCKS, SIDES, SOLIDS, case_tag, claims, fig11_measures, measurements  # noqa: F401
+from .claims import (CASES, SHOCKS, SIDES, SOLIDS, case_tag, claims, fig11_measures, measurements, summary_line,  # noqa: F401
+                     tally, verdict_flips)
 from .results import read_netcdf, write_netcdf
 
 FREE_EDGE = ("media.0.outer_wall=false", "media.1.outer_wall=false")
+# the paper's own ambiguity: whether the SSGM has an outer wall when the LSGM is shocked (MODEL.md)
+NO_SSGM_WALL = ("media.1.outer_wall=false",)
 FIG11_CASE = ("plate", "SSGM:C", "strong")
 FIG11_WINDOW = 2e-4  # the window of the paper's Fig. 11, 0-0.2 ms
 
@@ -38,11 +41,14 @@ def case_scenario(case, solver: str = "fast", extra=()) -> S.Scenario:
 
 def _cached(path: Path, sc: S.Scenario):
     """A stored result of exactly this scenario that reached its duration, else None."""
+    from .results import check_result_schema
+
     if not path.exists():
         return None
     try:
         ds = read_netcdf(path)
-    except (OSError, ValueError, KeyError):
+        check_result_schema(ds, path)
+    except Exception:  # noqa: BLE001 - truncated, corrupt, foreign, damaged: run it again
         return None
     if ds.attrs.get("scenario") == S.to_toml(sc) and float(ds["time"].values[-1]) >= sc.simulation.duration * (1 - 1e-9):
         return ds
@@ -104,10 +110,35 @@ def fig11_run(out: Path, reuse=True, extra=(), window=FIG11_WINDOW):
 # ---------------------------------------------------------------- the report
 
 
+def _cell(text) -> str:
+    """Text for a Markdown table cell: a '|' (|lambda|, |balance error|) would end the cell."""
+    return str(text).replace("|", "\\|")
+
+
+def _verdict_cell(c) -> str:
+    """The verdict, with the reason when the statement holds (or should hold) by construction."""
+    if c.by_construction:
+        return f"**{c.verdict}**: {_cell(c.construction)}"
+    if c.construction:
+        return f"**{c.verdict}** (expected by construction, so a bug of granel: {_cell(c.construction)})"
+    return f"**{c.verdict}**"
+
+
 def _claims_table(rows) -> list[str]:
     lines = ["| # | where | statement | paper | granel | rule | verdict |", "| --- | --- | --- | --- | --- | --- | --- |"]
     for k, c in enumerate(rows, 1):
-        lines.append(f"| {k} | {c.where} | {c.claim} | {c.paper} | {c.granel} | {c.rule} | **{c.verdict}** |")
+        cells = (c.where, c.claim, c.paper, c.granel, c.rule)
+        lines.append(f"| {k} | " + " | ".join(_cell(x) for x in cells) + f" | {_verdict_cell(c)} |")
+    return lines
+
+
+def _flips_table(flips, base: str, variant: str) -> list[str]:
+    """The statements whose verdict changes between two variants: verdicts and granel's values."""
+    lines = [f"| # | where | statement | verdict {base} | verdict {variant} | value {base} | value {variant} |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for f in flips:
+        lines.append(f"| {f.number} | {_cell(f.where)} | {_cell(f.claim)} | **{f.base_verdict}** | **{f.variant_verdict}** | "
+                     f"{_cell(f.base_value)} | {_cell(f.variant_value)} |")
     return lines
 
 
@@ -127,32 +158,73 @@ def _cases_table(m: dict, walls: dict) -> list[str]:
 
 def _free_edge_table(walled, free) -> list[str]:
     lines = ["| # | statement | three walls | free edge |", "| --- | --- | --- | --- |"]
-    for k, (a, b) in enumerate(zip(walled, free), 1):
+    other = {(c.where, c.claim): c for c in free}
+    for k, a in enumerate(walled, 1):
+        b = other.get((a.where, a.claim))
+        if b is None:
+            lines.append(f"| {k} | {_cell(a.claim)} | {_cell(a.granel)}: **{a.verdict}** | not checked (changed) |")
+            continue
         changed = " (changed)" if a.verdict != b.verdict else ""
-        lines.append(f"| {k} | {a.claim} | {a.granel}: **{a.verdict}** | {b.granel}: **{b.verdict}**{changed} |")
+        lines.append(f"| {k} | {_cell(a.claim)} | {_cell(a.granel)}: **{a.verdict}** | {_cell(b.granel)}: **{b.verdict}**{changed} |")
     return lines
 
 
-def write_report(out: Path, m: dict, walls: dict, figures: list, total_s: float, solver: str, m_free: dict | None = None) -> Path:
+def _variant_section(rows, variant_rows) -> list[str]:
+    """The paper's ambiguity about the SSGM's outer wall, as a variant: which verdicts flip when it
+    is removed in the cases shocked from the LSGM (the SSGM's outer column is then the far edge)."""
+    flips = verdict_flips(rows, variant_rows)
+    t, tf = tally(rows), tally(variant_rows)
+    to_agree = sum(f.variant_verdict == "agree" for f in flips)
+    to_differ = sum(f.variant_verdict == "differ" for f in flips)
+    lines = ["", "## The paper's ambiguity: the SSGM's outer wall, as a variant", "",
+             "The paper says \"three of the four boundaries of each granular medium are clamped\" (Sec. II: top, bottom and",
+             "outer, the fourth being the solid) yet excites the interface \"from the free edge of either the LSGM or SSGM\";",
+             "whether the SSGM has an outer wall when the shock comes from the LSGM is left open (MODEL.md section 1).",
+             "granel keeps it; the variant removes it (`media.1.outer_wall = false`) in the six LSGM-shocked cases (runs in",
+             "`runs-no-ssgm-wall/`; the SSGM-shocked cases are those above). The statements whose verdict flips:", "",
+             *_flips_table(flips, "with the wall", "without"), "",
+             f"{len(flips)} of {len(rows)} verdicts flip without the SSGM's outer wall: {to_agree} to agree, {to_differ} to "
+             f"differ. {_both_counts(t, tf, 'with the wall', 'without')}. "
+             + ("Neither reading makes every checked statement agree." if t["differ"] and tf["differ"] else "")]
+    return lines
+
+
+def _both_counts(t: dict, tf: dict, base: str = "with the outer walls", variant: str = "without") -> str:
+    """The agreement counts of the walled runs (`t`) and a variant (`tf`), in one sentence."""
+    held = (f"{t['by_construction']} hold by construction in both" if t["by_construction"] == tf["by_construction"]
+            else f"by construction: {t['by_construction']} {base}, {tf['by_construction']} {variant}")
+    return (f"Checked statements that agree: {t['agree']} of {t['checked']} {base}, "
+            f"{tf['agree']} of {tf['checked']} {variant} ({held})")
+
+
+def write_report(out: Path, m: dict, walls: dict, figures: list, total_s: float, solver: str, m_free: dict | None = None,
+                 m_variant: dict | None = None) -> Path:
     rows = claims(m)
-    agree = sum(c.agree for c in rows)
+    free_rows = claims(m_free) if m_free is not None else None
+    variant_rows = claims(m_variant) if m_variant is not None else None
+    held = [(k, c) for k, c in enumerate(rows, 1) if c.by_construction]
     lines = ["# granel vs Wang, Tawfick & Vakakis, Phys. Rev. E 104, 044906 (2021)", "",
              f"Generated by `granel paper` with the `{solver}` solver on the paper's geometry with three rigid walls per",
              "granular medium (top, bottom, outer; MODEL.md section 1). Every number below is computed from the result",
              "files in `runs/`; none is typed in. The rules are explained once in `granel.claims`: \"about X\" agrees",
-             "within +-30 %, a range agrees inside it, a three-figure number within 1 %, a comparison when it holds.", "",
-             "## Claims", "", *_claims_table(rows), "", f"{agree} of {len(rows)} statements agree.", "",
-             "## The twelve cases", "", *_cases_table(m, walls), "",
-             "Arrival at the solid: the first time its energy reaches 1 % of its peak. Arrival at a granule: the first",
-             "time its velocity toward the solid reaches 5 % of its peak. Modes for 90 / 99 %: eq. (16)."]
-    if m_free is not None:
-        free_rows = claims(m_free)
-        changed = sum(a.verdict != b.verdict for a, b in zip(rows, free_rows))
+             "within +-30 %, a range agrees inside it, a three-figure number within 1 %, a comparison when it holds.",
+             "A statement that follows from the model's symmetry, a bound the solver enforces or a rule granel applies",
+             "could not have come out otherwise: its verdict is \"by construction\", with the reason, and it is not",
+             "counted as agreement.", "",
+             "## Claims", "", *_claims_table(rows), "", f"**{summary_line(rows)}.**"
+             + (" By construction, not counted: " + "; ".join(f"#{k} ({c.where})" for k, c in held) + "." if held else "")]
+    if variant_rows is not None:
+        lines += _variant_section(rows, variant_rows)
+    lines += ["", "## The twelve cases", "", *_cases_table(m, walls), "",
+              "Arrival at the solid: the first time its energy reaches 1 % of its peak. Arrival at a granule: the first",
+              "time its velocity toward the solid reaches 5 % of its peak. Modes for 90 / 99 %: eq. (16)."]
+    if free_rows is not None:
+        changed = len(verdict_flips(rows, free_rows))
         lines += ["", "## What the outer walls change: the free-edge variant", "",
                   "The same twelve cases with `outer_wall = false` on both media (runs in `runs-free-edge/`): the outer",
-                  "column is free, and after the wave passes the outer granules fly off at constant speed.",
-                  f"{sum(c.agree for c in free_rows)} of {len(free_rows)} statements agree on the free edge, against {agree} with the walls; "
-                  f"{changed} verdicts change.", "", *_free_edge_table(rows, free_rows)]
+                  "column is free, and after the wave passes the outer granules fly off at constant speed. Every statement,",
+                  f"with the walls and without. {_both_counts(tally(rows), tally(free_rows))}; {changed} verdicts change.", "",
+                  *_free_edge_table(rows, free_rows)]
     lines += ["", "## Errata: the paper's slips and what granel does", "", "| where | the paper | granel |", "| --- | --- | --- |"]
     lines += [f"| {w} | {p} | {g} |" for w, p, g in ERRATA]
     if "fig11" in m:
@@ -163,12 +235,21 @@ def write_report(out: Path, m: dict, walls: dict, figures: list, total_s: float,
     for f in figures:
         lines.append(f"- [{Path(f).name}]({Path(f).relative_to(out)})")
     lines += ["", f"Total wall time of `granel paper`: {total_s:.1f} s."]
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    dump = {"measurements": m, "claims": [c.row() for c in rows]}
-    if m_free is not None:
-        dump["free_edge"] = {"measurements": m_free, "claims": [c.row() for c in free_rows]}
-    (out / "measurements.json").write_text(json.dumps(dump, indent=1, default=_jsonable))
+    from .guard.owners import MARK, text_mark
+    from .guard.writing import write_text
+
+    path = write_text(out / "report.md", "\n".join([text_mark("<!--"), *lines]) + "\n")
+    dump = {"written_by": MARK, "measurements": m, "claims": [c.row() for c in rows],
+            "summary": tally(rows) | {"line": summary_line(rows)}}
+    if free_rows is not None:
+        dump["free_edge"] = {"measurements": m_free, "claims": [c.row() for c in free_rows],
+                             "summary": tally(free_rows) | {"line": summary_line(free_rows)},
+                             "flips": [f.row() for f in verdict_flips(rows, free_rows)]}
+    if variant_rows is not None:
+        dump["no_ssgm_outer_wall"] = {"claims": [c.row() for c in variant_rows],
+                                      "summary": tally(variant_rows) | {"line": summary_line(variant_rows)},
+                                      "flips": [f.row() for f in verdict_flips(rows, variant_rows)]}
+    write_text(out / "measurements.json", json.dumps(dump, indent=1, default=_jsonable))
     return path
 
 
@@ -219,10 +300,18 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     if progress:
         progress("Fig. 11: paper's algorithm", how)
     m["fig11"] = fig11_measures(ds11, fig11_window) | {"source": how}
-    m_free = None
+    m_free = m_variant = None
     if free_edge:
         runs_free, _ = run_cases(out, solver, reuse, progress, (*extra, *FREE_EDGE), subdir="runs-free-edge")
         m_free = measurements(runs_free) | {"modes": m["modes"], "fig11": m["fig11"]}
+        runs_variant = dict(runs)
+        for case in CASES:
+            if case[1].startswith("LSGM"):
+                runs_variant[case], _ = run_case(case_scenario(case, solver, (*extra, *NO_SSGM_WALL)),
+                                                 out / "runs-no-ssgm-wall" / f"{case_tag(case)}.nc", reuse)
+                if progress:
+                    progress(case, "no SSGM outer wall")
+        m_variant = measurements(runs_variant) | {"modes": m["modes"], "fig11": m["fig11"]}
     figs = _figures(out, figdir, runs, model, modes, kinds, ds11, how, fig11_window)
     if progress:
         progress("figures", len(figs))
@@ -233,9 +322,16 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
         if progress:
             progress("animations", len(CASES) * 2)
     total = time.perf_counter() - t0
-    report = write_report(out, m, walls, [f for f in figs if str(f).endswith((".png", ".mp4", ".gif"))], total, solver, m_free)
-    return {"report": str(report), "total_s": total, "claims": [c.row() for c in claims(m)],
-            "walls": {case_tag(k): v for k, v in walls.items()}}
+    report = write_report(out, m, walls, [f for f in figs if str(f).endswith((".png", ".mp4", ".gif"))], total, solver, m_free,
+                          m_variant)
+    rows = claims(m)
+    res = {"report": str(report), "total_s": total, "claims": [c.row() for c in rows], "summary": summary_line(rows),
+           "walls": {case_tag(k): v for k, v in walls.items()}}
+    if m_free is not None:
+        res["free_edge_flips"] = [f.row() for f in verdict_flips(rows, claims(m_free))]
+    if m_variant is not None:
+        res["no_ssgm_wall_flips"] = [f.row() for f in verdict_flips(rows, claims(m_variant))]
+    return res
 
 
 def _figures(out, figdir, runs, model, modes, kinds, ds11, how, window) -> list:

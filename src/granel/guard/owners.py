@@ -93,6 +93,8 @@ def is_granel_file(path: Path) -> bool:
         size = path.stat().st_size
         with open(path, "rb") as fh:
             head = fh.read(HEAD)
+            if path.suffix.lower() == ".json":  # no comments in JSON: the mark is its first key
+                return mark in head[:512]
             if path.suffix.lower() in TEXT_SUFFIXES:
                 return mark in head.split(b"\n", 1)[0]
             tail = b""
