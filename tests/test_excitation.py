@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 from granel.excitation import PAPER_TAU, SHOCK_LEVELS, half_sine, harmonic_burst, tabulated
-from granel.scenario.files import read_load_table as read_force_csv
+from granel.scenario.tables import read_load_table as read_force_csv
 from granel.granular.system import Excitation, Stepper, initial_state
 
 from conftest import make_system

@@ -12,14 +12,16 @@ that no run ends in an error that loses its result and no command overwrites wha
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .exits import FILES, USAGE, GranelError
-from .owners import STAMP, folder_stamp, is_granel_file, stamp_folder
-from .writing import PREFIX, STAGE, replace_refusal
+from .owners import STAMP, folder_stamp, is_granel_file, process_token
+from .writing import PREFIX, STAGE, replace_refusal, write_text
 
 # foreign entries named in a refusal
 SHOWN = 3
@@ -216,6 +218,17 @@ class OutputPlan:
                 raise OutputPathError(f"{e.filename or ''}: no space left on the device", FILES) from None
             raise OutputPathError(f"cannot make the output folder {e.filename or ''} ({e.strerror or e})", FILES) from None
         return self
+
+
+def stamp_folder(folder: Path, kind: str) -> None:
+    """Mark `folder` as made by granel for `kind` (a command's outputs); idempotent."""
+    from .. import __version__
+
+    held = folder_stamp(folder)
+    if held is not None and held.get("kind") == kind:
+        return
+    write_text(Path(folder) / STAMP, json.dumps({"kind": kind, "version": __version__, "made": time.time(),
+                                                 "by": process_token()}) + "\n", check=False)
 
 
 def owned_by(folder: Path, kind: str) -> bool:

@@ -15,7 +15,6 @@ import hashlib
 import json
 import os
 import socket
-import time
 from pathlib import Path
 
 MARK = "written by granel"
@@ -151,15 +150,3 @@ def folder_stamp(folder: Path) -> dict | None:
     except (OSError, ValueError, UnicodeDecodeError):
         return None
     return data if isinstance(data, dict) and isinstance(data.get("kind"), str) else None
-
-
-def stamp_folder(folder: Path, kind: str) -> None:
-    """Mark `folder` as made by granel for `kind` (a command's outputs); idempotent."""
-    from .. import __version__
-    from .writing import write_text
-
-    held = folder_stamp(folder)
-    if held is not None and held.get("kind") == kind:
-        return
-    write_text(Path(folder) / STAMP, json.dumps({"kind": kind, "version": __version__, "made": time.time(),
-                                                 "by": process_token()}) + "\n", check=False)

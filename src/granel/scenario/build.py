@@ -19,7 +19,8 @@ from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
 from ..solid.beam import build_beam
 from ..solid.plate import LayerSpec, PlateMesh, build_plate
-from .files import read_granules_table, to_toml
+from .files import to_toml
+from .tables import read_granules_table
 from .schema import ExcitationSpec, Scenario, ScenarioError
 
 # Hertz impact: contact duration = HERTZ_DURATION * delta_max / v = 2 (2/5) B(2/5, 1/2) delta_max / v

@@ -412,7 +412,7 @@ class ExcitationSpec(_Strict):
             return harmonic(self.amplitude, self.frequency, self.t0, self.duration or math.inf, self.phase, self.ramp_cycles)
         if self.kind == "chirp":
             return chirp(self.amplitude, self.f0, self.f1, self.duration, self.t0, self.mode, self.ramp_cycles)
-        from .files import read_load_table
+        from .tables import read_load_table
 
         path = Path(self.file)
         if base is not None and not path.is_absolute():
