@@ -92,7 +92,9 @@ def test_the_measured_cutoff_matches_the_linearised_chain():
     ref = eigenfrequencies(0.005)
     assert c.beads == tuple(f"C:{k}" for k in range(1, BEADS + 1))
     assert c.end_stiffness[0] == 0.0 and c.end_stiffness[1] == pytest.approx(2.0, rel=1e-9)
-    assert c.factor == pytest.approx(math.cos(math.pi / 32), rel=1e-12)
+    # the factor is an eigenvalue of the contact stiffnesses, which the static equilibrium fixes to its Newton
+    # tolerance (1e-10 of the load): it follows them within the end stiffness's bound
+    assert c.factor == pytest.approx(math.cos(math.pi / 32), rel=1e-9)
     assert len(c.modes_hz) == BEADS
     assert np.abs(c.modes_hz / ref - 1).max() < 1e-4
     assert c.top_mode_hz == pytest.approx(ref[-1], rel=1e-4)

@@ -52,9 +52,10 @@ from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 MAX_CASES = 100_000
 # the version of the metric definitions: bumped when one changes (2: arrivals relative to the
 # driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
-# `force_metrics`; 4: a chain's measured cut-off, `chain_metrics`), so that cached results are
-# recomputed
-METRIC_RULES = 4
+# `force_metrics`; 4: a chain's measured cut-off, `chain_metrics`; 5: energy shares of the dynamic
+# input alone, NaN with a reason where nothing is dynamic, and the cut-off by modal projection),
+# so that cached results are recomputed
+METRIC_RULES = 5
 
 
 class SweepFileError(S.ScenarioError):
@@ -386,7 +387,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
     1e-3 of the driven granule's peak speed, so that round-off never counts as an arrival);
     arrival_solid_*_s is the first time the solid holds 1 % of the input work. Run mode adds
     `chain_metrics` (cutoff_Hz), NaN where a run has no precompressed chain, its reason under
-    `notes`."""
+    `notes`; so are the energy shares of a run with nothing dynamic to share (`run_metrics`)."""
     from .analysis.reciprocity import reciprocity_metrics, run_metrics
     from .results import write_netcdf
     from .run import run_scenario
@@ -428,6 +429,12 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
                 "centroid_fwd_hz": f["spectral_centroid_hz"], "centroid_bwd_hz": k["spectral_centroid_hz"],
                 "arrival_solid_fwd_s": f["arrival_solid_s"], "arrival_solid_bwd_s": k["arrival_solid_s"],
             }
+            named = {"energy_far_peak_frac": "energy_far_{}", "solid_energy_peak_frac": "solid_energy_{}",
+                     "arrival_solid_s": "arrival_solid_{}_s"}
+            notes = {named[key].format(way): why for way, r in (("fwd", f), ("bwd", k)) for key, why in r["notes"].items()
+                     if key in named}
+            if notes:
+                res["notes"] = notes
         else:
             ds = runs["run"]
             from .analysis.reciprocity import excitation_of
@@ -438,6 +445,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
             res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
             chain, notes = chain_metrics(scenarios[0][1], ds)
             res["metrics"].update(chain)
+            notes = {**r["notes"], **notes}
             if notes:
                 res["notes"] = notes
         res["metrics"].update(force_metrics(scenarios, runs))

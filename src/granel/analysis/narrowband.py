@@ -141,10 +141,19 @@ class ChainCutoff:
     factor: float  # f_top / f_c of the linearised chain with these ends (`chain_mode_factors`)
     beads: tuple[str, ...]  # the chain's beads, end to end
     end_stiffness: tuple[float, float]  # each end's wall stiffness over the pair stiffness (0: free)
-    modes_hz: np.ndarray  # the chain's modes found (undamped frequencies), ascending
+    modes_hz: np.ndarray  # each mode's undamped frequency, measured in its modal coordinate (NaN: not excited)
     window: tuple[float, float]  # the free response analysed [s]
     strain: float  # the largest |delta - delta0| / delta0 of a pair over the record
     spread: float  # |f_top from the window's first 3/4 / f_top - 1|: the fit's own check
+    leak: float  # the top mode's coordinate: its second strongest oscillation over the mode's
+
+
+def _chain_matrix(n: int, k_first: float, k_last: float) -> np.ndarray:
+    """T = tridiag(-1, 2, -1) with corners 1 + k_first and 1 + k_last: M^-1 K of a monatomic
+    chain in units of K / m (see `chain_mode_factors`)."""
+    d = np.full(n, 2.0)
+    d[0], d[-1] = 1.0 + k_first, 1.0 + k_last
+    return np.diag(d) - np.diag(np.ones(n - 1), 1) - np.diag(np.ones(n - 1), -1)
 
 
 def chain_mode_factors(n: int, k_first: float = 0.0, k_last: float = 0.0) -> np.ndarray:
@@ -161,10 +170,7 @@ def chain_mode_factors(n: int, k_first: float = 0.0, k_last: float = 0.0) -> np.
         raise ValueError(f"a chain needs at least one bead, got {n}")
     if n == 1:
         return np.array([math.sqrt(max(k_first + k_last, 0.0) / 4.0)])
-    d = np.full(n, 2.0)
-    d[0], d[-1] = 1.0 + k_first, 1.0 + k_last
-    T = np.diag(d) - np.diag(np.ones(n - 1), 1) - np.diag(np.ones(n - 1), -1)
-    return np.sqrt(np.clip(np.linalg.eigvalsh(T), 0.0, None) / 4.0)
+    return np.sqrt(np.clip(np.linalg.eigvalsh(_chain_matrix(n, k_first, k_last)), 0.0, None) / 4.0)
 
 
 def _chain_contacts(ds, system):
@@ -222,26 +228,58 @@ def _chain_contacts(ds, system):
     return order, links, on_wall
 
 
-# the modal fit of a chain's free response: samples per period of the chain's highest possible
-# frequency, the most samples fitted, and the pencil's span in samples (16 periods of that
-# frequency: a pencil much shorter, such as a third of a short record, lets the weak harmonics of
-# Hertz's law pull the top mode by up to 1e-3)
+# The fit of a chain's free response. Outputs are thinned to about SAMPLES_PER_PERIOD samples a
+# period of the chain's highest possible frequency (Gershgorin's bound); each modal coordinate
+# is fitted with MODE_ORDER exponentials (its mode, and room for the weak oscillations that leak
+# into it: the contacts' harmonics and their coupling to the other modes), which needs
+# SAMPLES_PER_EXPONENTIAL samples each; the pencil spans PENCIL samples (8-16 periods of that
+# bound, or 2/3 of a shorter record). A coordinate's fit costs about samples x PENCIL^2, and the
+# chain's n coordinates n times that: the first MAX_SAMPLES samples are fitted (256 periods of the
+# bound, far beyond what the checks ask for), or as many as `min_periods` of the top mode need.
+# Neither the order nor the sample budget grows with n: the modal filter, not the fit, separates
+# the modes.
 SAMPLES_PER_PERIOD = 16.0
-MAX_SAMPLES = 600
+MODE_ORDER = 8
+SAMPLES_PER_EXPONENTIAL = 8
 PENCIL = 256
+MAX_SAMPLES = 4096
+MAX_LEAK = 0.1  # a coordinate whose second oscillation reaches this share of its mode is not one mode
+MIN_SHARE = 1e-6  # the top mode's coordinate below this share (RMS) of the strongest one: not excited
 
 
-def _top_mode(t, V, order: int, n: int):
-    """(damped_modes of V, the index of the top mode): the highest of the n strongest
-    oscillations that reach 1e-3 of the strongest (the harmonics and combination tones of Hertz's
-    law are weaker by about the strain)."""
-    modes = damped_modes(t, V, order, pencil=min(PENCIL, (2 * len(t)) // 3))
-    strong = np.zeros(len(modes.frequency), bool)
-    strong[np.argsort(modes.strength)[::-1][:n]] = True
-    strong &= modes.strength >= 1e-3 * modes.strength.max(initial=0.0)
-    if not strong.any():
-        raise CutoffError("no oscillation found in the chain's free response")
-    return modes, int(np.flatnonzero(strong)[-1])
+def _chain_modes(n: int, k_first: float, k_last: float) -> tuple[np.ndarray, np.ndarray]:
+    """(factors as `chain_mode_factors`, unit mode shapes as columns), ascending."""
+    if n == 1:
+        return chain_mode_factors(1, k_first, k_last), np.ones((1, 1))
+    lam, shapes = np.linalg.eigh(_chain_matrix(n, k_first, k_last))
+    return np.sqrt(np.clip(lam, 0.0, None) / 4.0), shapes
+
+
+def _mode_of(t, q) -> tuple[float, float, float] | None:
+    """(undamped frequency, damping ratio, leak) of the strongest oscillation in one modal
+    coordinate q(t), by `damped_modes` with MODE_ORDER exponentials; the leak is the next
+    strongest oscillation's amplitude over it. None when q holds no oscillation."""
+    try:
+        modes = damped_modes(t, q, MODE_ORDER, pencil=min(PENCIL, (2 * len(t)) // 3))
+    except ValueError:
+        return None
+    if not len(modes.frequency):
+        return None
+    rank = np.argsort(modes.strength)[::-1]
+    k = int(rank[0])
+    leak = float(modes.strength[rank[1]] / modes.strength[k]) if len(rank) > 1 else 0.0
+    return float(modes.frequency[k]), float(modes.damping_ratio[k]), leak
+
+
+def _load_fields(system, what: str = "amplitude") -> str:
+    """The scenario fields that set the chain ringing: the transient loads' amplitudes (`what` =
+    "amplitude") or durations ("duration")."""
+    names = {"amplitude": {"half_sine": "fmax", "table": "file"},
+             "duration": {"half_sine": "tau", "burst": "cycles", "table": "file"}}[what]
+    fields = [f"excitations.{k}.{names.get(e.history.kind, what)}" for k, e in enumerate(system.excitations)
+              if e.history.kind != "constant"]
+    fields += [f"the motion of wall {w.name or '?'} ({what})" for w in system.walls if w.drive is not None]
+    return ", ".join(fields) or "initial_velocities"
 
 
 def _free_start(system, t_end: float) -> tuple[float, bool]:
@@ -264,9 +302,15 @@ def _free_start(system, t_end: float) -> tuple[float, bool]:
             end = w.drive.t0 + w.drive.duration
             if not end < t_end:
                 raise CutoffError(f"wall {w.name or '?'} moves until the end of the run: a cut-off is read from the free "
-                                  "response")
+                                  "response (give its motion a finite duration)")
             start = max(start, end)
     return start, driven
+
+
+def _duration_for(t_first: float, span: float, output_every: float) -> float:
+    """The shortest simulation.duration (a whole number of outputs) whose record holds `span`
+    seconds after t_first."""
+    return math.ceil((t_first + span) / output_every * (1 + 1e-12)) * output_every
 
 
 def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 0.1,
@@ -286,28 +330,30 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
     * the chain, its order and its ends from the run's equilibrium contacts (`equilibrium_*`:
       each loaded contact's stiffness 3/2 F / delta, exact for Hertz's law); the pairs must be
       equally stiff and the beads equally heavy (monatomic), and the ends' wall stiffness over
-      the pairs' sets the mode factor;
-    * the modes from the beads' velocities along the chain after the last transient load has
-      ended (`damped_modes`, 4n exponentials, every bead a channel), each mode's undamped
-      frequency |s| / 2 pi (for the chain's Tsuji damping, linearised, exactly the undamped
-      eigenfrequency: the dashpots are proportional to the springs);
-    * the top mode: the highest of the n strongest oscillations that reach 1e-3 of the
-      strongest (the order beyond 2n takes up the weak harmonics of Hertz's law, which would
-      otherwise pull the fitted modes by about the strain).
+      the pairs' sets the mode factor and the mode shapes (the unit eigenvectors of T);
+    * the modal coordinates q_j = phi_j' v of the beads' velocities along the chain after the
+      last transient load (a modal filter: the beads are equally heavy, so the shapes are
+      orthogonal under the mass and each coordinate holds one mode, whatever the spacing of the
+      modes: the top two of n beads are f_c pi^2 / (4 n^2) apart);
+    * each mode's frequency from its coordinate (`damped_modes`, MODE_ORDER exponentials): the
+      strongest oscillation's undamped frequency |s| / 2 pi (for the chain's Tsuji damping,
+      linearised, exactly the undamped eigenfrequency: the dashpots are proportional to the
+      springs, so they neither shift the frequency nor couple the modes).
 
-    The fit checks itself: it is repeated on the first three quarters of the free response, and
-    a top mode that moves by more than `rtol` between the two (`spread`) is refused; so is one
-    above Gershgorin's bound of the linearised chain (no mode can be there: a fit the record
-    cannot support).
+    The fit checks itself: the top mode is fitted again on the first three quarters of the free
+    response, and one that moves by more than `rtol` between the two (`spread`) is refused; so
+    is one above Gershgorin's bound of the linearised chain, one not excited, and a coordinate
+    whose second oscillation reaches MAX_LEAK of its mode (the motion is not the linearised
+    chain's).
 
-    CutoffError (a ValueError) says why when the run does not allow it: no precompression
-    (`simulation.equilibrate` with a constant load), loaded contacts that are not one straight
-    monatomic chain, a drive that lasts to the end, outputs too sparse for the chain's highest
-    frequency (that bound, 2.5 samples a period), a free response with too few samples (8 per
-    exponential fitted) or shorter than `min_periods` periods of the top mode, a fit that fails
-    its checks, or contacts whose overlap swings by more than `max_strain` of its static value
-    (not the linear regime). `system` is the run's granular system
-    (`scenario.build.build_granular(sc, sc.base)[0]`)."""
+    CutoffError (a ValueError) says why, and which field to change by how much, when the run
+    does not allow it: no precompression (`simulation.equilibrate` with a constant load), loaded
+    contacts that are not one straight monatomic chain, a drive that lasts to the end, outputs too
+    sparse for the chain's highest frequency (2.5 samples a period), a free response with too few
+    samples (SAMPLES_PER_EXPONENTIAL per exponential) or shorter than `min_periods` periods of the
+    top mode, a fit that fails its checks, or contacts whose overlap swings by more than
+    `max_strain` of its static value (not the linear regime). `system` is the run's granular
+    system (`scenario.build.build_granular(sc, sc.base)[0]`)."""
     if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
         raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
                           "a cut-off belongs to a precompressed chain")
@@ -317,41 +363,69 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
     n = len(order)
     labels = list(system.labels)
     t = np.asarray(ds["time"].values, float)
+    output_every = (t[-1] - t[0]) / max(len(t) - 1, 1)
     # sampling: Gershgorin's bound on the linearised chain's frequencies
     f_bound = math.sqrt(max(4.0, 2.0 + k_ends[0], 2.0 + k_ends[1]) * K / m) / (2 * math.pi)
-    t_sel, V, strain = _free_response(ds, system, order, axis, f_bound, max_strain)
-    order_fit = 4 * n  # the n modes, and as many exponentials again for the contacts' weak harmonics
-    if len(t_sel) < 8 * order_fit:
-        raise CutoffError(f"the free response after {t_sel[0] if len(t_sel) else t[-1]:.3g} s holds {len(t_sel)} usable "
-                          f"samples; {8 * order_fit} are needed for a chain of {n} beads: lengthen simulation.duration")
+    factors, shapes = _chain_modes(n, *k_ends)
+    f_expected = factors[-1] * math.sqrt(K / m) / math.pi  # the top mode, linearised: sizes the record only
+    need = SAMPLES_PER_EXPONENTIAL * MODE_ORDER
+    # the samples fitted: MAX_SAMPLES, or more when min_periods of the top mode need more
+    def budget(h):
+        return max(MAX_SAMPLES, need + math.ceil(1.25 * min_periods / (f_expected * h)))
+
+    t_sel, V, strain, step = _free_response(ds, system, order, axis, f_bound, max_strain, budget)
+    first = float(t_sel[0]) if len(t_sel) else float(t[-1])
+    enough = _duration_for(first, max((need - 1) * step, min_periods / f_expected), output_every)
+    if len(t_sel) < need:
+        raise CutoffError(f"the free response after {first:.3g} s holds {len(t_sel)} usable samples (one every "
+                          f"{step:.3g} s); {need} are needed, and {min_periods:g} periods of the top mode (about "
+                          f"{f_expected:.4g} Hz): raise simulation.duration to at least {enough:.10g} s")
     if not np.any(V):
-        raise CutoffError("the chain does not move after its loads end: nothing to measure")
-    modes, k = _top_mode(t_sel, V, order_fit, n)
-    f_top = float(modes.frequency[k])
-    if f_top > f_bound * (1.0 + 1e-3):
-        raise CutoffError(f"the modal fit finds an oscillation at {f_top:.4g} Hz, above any mode of the linearised chain "
-                          f"(at most {f_bound:.4g} Hz): the free response is too short or too noisy for it; lengthen "
-                          "simulation.duration")
+        raise CutoffError(f"the chain does not move after its loads end: nothing to measure (raise {_load_fields(system)})")
+    Q = V @ shapes  # the modal coordinates
+    rms = np.sqrt(np.mean(Q * Q, axis=0))
+    if not rms[-1] > MIN_SHARE * rms.max():
+        raise CutoffError(f"the top mode is not excited (its coordinate holds {rms[-1] / rms.max():.2g} of the strongest "
+                          f"mode's): shorten {_load_fields(system, 'duration')} to less than half its period "
+                          f"({0.5 / f_expected:.3g} s), on an end bead")
+    fits = [_mode_of(t_sel, Q[:, j]) if rms[j] > MIN_SHARE * rms.max() else None for j in range(n)]
+    if fits[-1] is None:
+        raise CutoffError(f"no oscillation found in the top mode's coordinate: raise {_load_fields(system)} above the "
+                          "round-off of the chain's motion")
+    f_top, zeta_top, leak = fits[-1]
     span = float(t_sel[-1] - t_sel[0])
+    decays = zeta_top * 2 * math.pi * f_top * span  # e-folds of the top mode over the window
+    capped = t_sel[-1] + step < t[-1] - 0.5 * output_every  # the budget, not the run, ends the window
+    if capped or decays > 10.0:
+        longer = (f"the record already holds the top mode's ring-down (it decays by e^-{decays:.3g} over the window), so "
+                  f"a longer run adds nothing: weaken {_load_fields(system)} (the contacts swing by {strain:.2g} of their "
+                  "overlap) or tighten simulation.rtol")
+    else:
+        longer = (f"raise simulation.duration to at least "
+                  f"{_duration_for(first, 10.0 / max(zeta_top * 2 * math.pi * f_top, 1e-300), output_every):.10g} s "
+                  "(10 e-folds of the top mode's ring-down)")
+    if f_top > f_bound * (1.0 + 1e-3) or leak > MAX_LEAK:
+        what = (f"an oscillation at {f_top:.4g} Hz, above any mode of the linearised chain (at most {f_bound:.4g} Hz)"
+                if f_top > f_bound * (1.0 + 1e-3) else
+                f"a second oscillation of {leak:.2g} of the mode's amplitude beside it (the motion is not the linearised "
+                "chain's modes)")
+        raise CutoffError(f"the fit of the top mode's coordinate finds {what}: {longer}")
     if span * f_top < min_periods:
         raise CutoffError(f"the free response ({span:.3g} s) holds {span * f_top:.1f} periods of the top mode "
-                          f"({f_top:.4g} Hz); {min_periods:g} are needed: lengthen simulation.duration")
+                          f"({f_top:.4g} Hz); {min_periods:g} are needed: raise simulation.duration to at least "
+                          f"{_duration_for(first, min_periods / f_top, output_every):.10g} s")
     # the same fit on the first three quarters of the window: a fit the record supports agrees
     part = (3 * len(t_sel)) // 4
-    other, kk = _top_mode(t_sel[:part], V[:part], order_fit, n)
-    spread = abs(float(other.frequency[kk]) / f_top - 1.0)
+    other = _mode_of(t_sel[:part], Q[:part, -1])
+    spread = abs(other[0] / f_top - 1.0) if other is not None else math.inf
     if not spread <= rtol:
         raise CutoffError(f"the top mode ({f_top:.6g} Hz) moves by {spread:.2g} when the last quarter of the free response "
-                          f"is left out (limit {rtol:g}): the record is too short (or too nonlinear) for a reliable fit; "
-                          "lengthen simulation.duration")
-    factor = float(chain_mode_factors(n, *k_ends)[-1])
-    strong = np.zeros(len(modes.frequency), bool)
-    strong[np.argsort(modes.strength)[::-1][:n]] = True
-    strong &= modes.strength >= 1e-3 * modes.strength.max()
-    return ChainCutoff(cutoff_hz=f_top / factor, top_mode_hz=f_top, top_damping_ratio=float(modes.damping_ratio[k]),
-                       factor=factor, beads=tuple(labels[g] for g in order), end_stiffness=k_ends,
-                       modes_hz=modes.frequency[strong], window=(float(t_sel[0]), float(t_sel[-1])), strain=strain,
-                       spread=spread)
+                          f"is left out (limit {rtol:g}): {longer}")
+    modes = np.array([f[0] if f is not None else math.nan for f in fits])
+    return ChainCutoff(cutoff_hz=f_top / float(factors[-1]), top_mode_hz=f_top, top_damping_ratio=zeta_top,
+                       factor=float(factors[-1]), beads=tuple(labels[g] for g in order), end_stiffness=k_ends,
+                       modes_hz=modes, window=(float(t_sel[0]), float(t_sel[-1])), strain=strain, spread=spread,
+                       leak=leak)
 
 
 def _monatomic_chain(ds, system):
@@ -376,17 +450,17 @@ def _monatomic_chain(ds, system):
     return order, m, K, k_ends, axis
 
 
-def _free_response(ds, system, order, axis, f_bound: float, max_strain: float):
+def _free_response(ds, system, order, axis, f_bound: float, max_strain: float, budget):
     """(times, the beads' velocities along the chain (times, beads), the contacts' largest swing
-    over their static overlap) of the chain's free response: after the last transient load,
-    thinned to about SAMPLES_PER_PERIOD samples a period of f_bound, at most MAX_SAMPLES. CutoffError
-    for outputs too sparse for f_bound, nothing that sets the chain moving, or a swing beyond
-    max_strain (not the linear regime)."""
+    over their static overlap, the sample spacing) of the chain's free response: after the last
+    transient load, thinned to about SAMPLES_PER_PERIOD samples a period of f_bound, its first
+    budget(spacing) samples. CutoffError for outputs too sparse for f_bound, nothing that sets the
+    chain moving, or a swing beyond max_strain (not the linear regime)."""
     t = np.asarray(ds["time"].values, float)
     dt = (t[-1] - t[0]) / max(len(t) - 1, 1)
     if len(t) < 2 or 1.0 / dt < 2.5 * f_bound:
         raise CutoffError(f"outputs every {dt:.3g} s sample the chain's modes (up to {f_bound:.4g} Hz) fewer than 2.5 times a "
-                          "period: lower simulation.output_every")
+                          f"period: lower simulation.output_every to at most {1.0 / (2.5 * f_bound):.3g} s")
     start, driven = _free_start(system, t[-1])
     if not driven and not np.any(ds["v_x"].values[0, order]) and not np.any(ds["v_y"].values[0, order]):
         raise CutoffError("nothing sets the chain moving (no transient load, moving wall or initial velocity)")
@@ -397,9 +471,10 @@ def _free_response(ds, system, order, axis, f_bound: float, max_strain: float):
     strain = float(np.max(np.abs(delta - delta[0]) / delta[0]))
     if strain > max_strain:
         raise CutoffError(f"a contact's overlap swings by {strain:.3g} of its static value (limit {max_strain:g}): the chain "
-                          "is not in its linear regime; drive it more weakly")
+                          f"is not in its linear regime; drive it more weakly: scale {_load_fields(system)} down by a "
+                          f"factor of at least {strain / max_strain:.3g}")
     sel = np.flatnonzero(t >= start + 0.5 * dt)
     q = max(1, int(1.0 / (dt * SAMPLES_PER_PERIOD * f_bound)))
-    sel = sel[::q][:MAX_SAMPLES]
+    sel = sel[::q][:budget(q * dt)]
     V = ds["v_x"].values[sel][:, order] * axis[0] + ds["v_y"].values[sel][:, order] * axis[1]
-    return t[sel], V, strain
+    return t[sel], V, strain, q * dt

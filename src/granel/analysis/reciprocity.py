@@ -95,9 +95,13 @@ def nonreciprocity_index(s_fwd, s_bwd) -> float:
 
 
 def solid_arrival(ds, fraction: float = 0.01) -> float:
-    """First time the solid holds `fraction` of the input work."""
-    w = float(ds["input_work"].values.max())
-    return arrival_time(ds["time"].values, ds["energy_solid"].values, fraction, w) if w > 0 else float("nan")
+    """First time the solid holds `fraction` of the dynamic input (`dynamic_input`), its energy
+    counted from its static state (`dynamic_energy`); NaN when nothing drives the run."""
+    w, _ = dynamic_input(ds)
+    if not w > 0 or "energy_solid" not in ds:
+        return float("nan")
+    e, _ = dynamic_energy(ds, None)
+    return arrival_time(ds["time"].values, e, fraction, w)
 
 
 def far_medium(ds, excited_label: str) -> str:
@@ -131,32 +135,116 @@ def input_energy(ds) -> float:
     return float(sum(ds[v].values[0] for v in held if v in ds))
 
 
+def static_loads(ds) -> list[tuple[int, np.ndarray]]:
+    """The static preload of a run: (granule index, force vector [N]) of each constant load when
+    the run starts from their equilibrium (`simulation.equilibrate`); [] otherwise (a constant
+    load applied to a medium at rest is a step load, part of the dynamic input)."""
+    sc = tomllib.loads(ds.attrs["scenario"])
+    if not sc.get("simulation", {}).get("equilibrate", False) or "equilibrium_contact" not in ds:
+        return []
+    labels = [str(g) for g in ds["granule"].values]
+    out = []
+    for e in sc.get("excitations", []):
+        if e.get("kind") != "constant":
+            continue
+        d = e.get("direction", "toward_solid")
+        if isinstance(d, str):
+            u = toward_solid(sc, e["granule"]) * (1.0 if d == "toward_solid" else -1.0)
+        else:
+            u = np.asarray(d, float) / np.hypot(*d)
+        out.append((labels.index(e["granule"]), float(e["value"]) * u))
+    return out
+
+
+def static_work(ds, medium: str | None = None) -> np.ndarray:
+    """The static preload's work since t = 0 on the granules of `medium` (all by default):
+    sum F . (r(t) - r(0)), exact for a constant force; zeros without a preload."""
+    w = np.zeros(ds.sizes["time"])
+    media = ds["medium"].values
+    for g, F in static_loads(ds):
+        if medium is None or str(media[g]) == medium:
+            w += F[0] * (ds["x"].values[:, g] - ds["x"].values[0, g]) + F[1] * (ds["y"].values[:, g] - ds["y"].values[0, g])
+    return w
+
+
+def dynamic_input(ds) -> tuple[float, str | None]:
+    """(W, why W is NaN): the largest input work less the static preload's (`static_work`) over
+    the run, or, for a striker (no load but a preload), the energy it holds at the start. NaN
+    when the scenario holds nothing dynamic: no transient load, moving wall or initial motion,
+    and no constant load applied at rest (a preload's equilibrium residual moves the granules by
+    round-off, which is no input)."""
+    sc = tomllib.loads(ds.attrs["scenario"])
+    preload = bool(static_loads(ds))
+    loads = [e for e in sc.get("excitations", []) if e.get("kind") != "constant" or not preload]
+    loads += [w for w in sc.get("walls", []) if w.get("motion")]
+    striker = bool(sc.get("initial_velocities"))
+    if not loads and not striker:
+        return float("nan"), ("nothing drives the run beyond its static preload (no transient load, moving wall or "
+                              "initial motion)" if preload else "nothing drives the run (no load, moving wall or "
+                              "initial motion)")
+    w = float(np.max(ds["input_work"].values - static_work(ds)))
+    if loads:
+        return (w, None) if w > 0 else (float("nan"), "the loads do no work within the run")
+    if preload:
+        return float("nan"), ("a striker on a precompressed medium: the result does not separate its initial "
+                              "motion from the equilibrium's energy")
+    return input_energy(ds), None
+
+
+def dynamic_energy(ds, medium: str | None) -> tuple[np.ndarray, str | None]:
+    """(E(t), why it is NaN) of a medium (None: the solid) counted from its static state: under
+    a preload E(t) - E(0) less its static loads' work (`static_work`; E(0) is the equilibrium's,
+    the medium at rest), else E(t). To second order in the motion this is the medium's kinetic
+    energy and its contacts' elastic energy about equilibrium."""
+    name = "energy_solid" if medium is None else f"energy_{medium.lower()}"
+    e = np.asarray(ds[name].values, float)
+    if not static_loads(ds):
+        return e, None
+    if medium is not None:
+        sel = ds["medium"].values == medium
+        if any(np.any(ds[v].values[0, sel] != 0) for v in ("v_x", "v_y", "omega")):
+            return np.full_like(e, np.nan), (f"medium {medium} moves at the start of a precompressed run: the result "
+                                              "does not separate its motion from the equilibrium's energy")
+    return e - e[0] - (static_work(ds, medium) if medium is not None else 0.0), None
+
+
 def run_metrics(ds, measured: str, modes=None, model=None) -> dict:
     """Per-run numbers: arrival at the measured granule (`pulse_arrival`: 5 % of the measured
     peak, NaN unless that peak reaches 1e-3 of the driven granule's) and at the solid (1 % of the
-    input work), peak velocity, energy transmitted to the far medium, spectral centroid of the solid."""
+    input), peak velocity, energy transmitted to the far medium, spectral centroid of the solid.
+
+    Energy shares are of the dynamic input W (`dynamic_input`: the loads' largest work less a
+    static preload's, or a striker's energy), each energy counted from its static state
+    (`dynamic_energy`), so that a preload's stored energy and its work count for nothing;
+    `notes` holds the reason for each one that is NaN (nothing dynamic to share)."""
     label, d = excitation_of(ds)
     t = ds["time"].values
-    w = input_energy(ds)
+    w, why = dynamic_input(ds)
     far = far_medium(ds, label)
     v = directed_velocity(ds, measured, toward_solid(tomllib.loads(ds.attrs["scenario"]), measured))
-    e_far = ds[f"energy_{far.lower()}"].values / w if w > 0 else np.zeros_like(t)
+    e_far, why_far = dynamic_energy(ds, far)
+    why_far = why or why_far
+    e_solid = dynamic_energy(ds, None)[0] if "energy_solid" in ds else np.zeros_like(t)
+    nan = float("nan")
     out = {
         "excited": label,
         "measured": measured,
         "arrival_measured_s": pulse_arrival(t, v, driven_peak_speed(ds, label)),
-        "arrival_solid_s": solid_arrival(ds) if "energy_solid" in ds else float("nan"),
+        "arrival_solid_s": solid_arrival(ds) if "energy_solid" in ds else nan,
         "peak_velocity_m_s": float(np.abs(v).max()),
         "far_medium": far,
-        "energy_far_peak_frac": float(e_far.max()),
-        "energy_far_final_frac": float(e_far[-1]),
-        "solid_energy_peak_frac": float(ds["energy_solid"].values.max() / w) if w > 0 else 0.0,
-        "input_work_J": w,  # the loads' work, or a striker's energy
+        "energy_far_peak_frac": float(e_far.max() / w) if why_far is None else nan,
+        "energy_far_final_frac": float(e_far[-1] / w) if why_far is None else nan,
+        "solid_energy_peak_frac": float(e_solid.max() / w) if why is None else nan,
+        "input_work_J": w,  # the dynamic loads' work, or a striker's energy
     }
+    notes = {k: why_far for k in ("energy_far_peak_frac", "energy_far_final_frac") if why_far}
+    notes.update({k: why for k in ("solid_energy_peak_frac", "input_work_J", "arrival_solid_s") if why})
     try:
         out["spectral_centroid_hz"] = spectral_centroid(ds, modes, model)
     except ValueError:
-        out["spectral_centroid_hz"] = float("nan")
+        out["spectral_centroid_hz"] = nan
+    out["notes"] = notes
     return out
 
 

@@ -95,6 +95,70 @@ def channel_names(grow: str) -> tuple[str, str]:
     return ("bottom", "top") if grow in ("left", "right") else ("left", "right")
 
 
+# Touching granules are placed so that their overlap, as the kernels compute it
+# (`granular.kernels.pair_overlap`, `wall_overlap`, `point_overlap`), is at most -CLEARANCE ulps of
+# the sum of radii, never a round-off overlap: a packing spaced exactly by its radii has overlaps
+# of about 1e-18 m here and there, whose Hertz forces set a medium that nothing loads moving at
+# about 1e-19 m/s. The lattice is spaced by R (1 + lam), lam = 0 first, then 2^k eps: the smallest
+# lam that clears every contact (a few 1e-15, moving granules by about 1e-16 m).
+CLEARANCE = 2
+MAX_SPACINGS = 40  # lam up to 2^38 eps, about 6e-5: beyond it something else is wrong
+
+
+def _pair_clear(pos: np.ndarray, radius: np.ndarray, pairs: np.ndarray) -> bool:
+    """Every pair (i, j) of `pairs` apart by CLEARANCE ulps or more in the kernel's arithmetic:
+    (R_i + R_j) - sqrt(dx dx + dy dy) with dx = x_j - x_i (one more ulp covers a fused dx dx + dy dy)."""
+    if not len(pairs):
+        return True
+    i, j = pairs[:, 0], pairs[:, 1]
+    dx = pos[j, 0] - pos[i, 0]
+    dy = pos[j, 1] - pos[i, 1]
+    reach = radius[i] + radius[j]
+    return bool(np.all(reach - np.sqrt(dx * dx + dy * dy) <= -CLEARANCE * np.spacing(reach)))
+
+
+def _wall_clear(pos: np.ndarray, radius: np.ndarray, wall: Wall) -> bool:
+    """No granule whose centre projects onto (or within a radius of) the wall overlaps it in the
+    kernel's arithmetic, R - ((x - p0) . n), n the unit normal."""
+    n = np.asarray(wall.normal, float) / math.hypot(*wall.normal)
+    p0, p1 = np.asarray(wall.p0, float), np.asarray(wall.p1, float)
+    length = math.hypot(*(p1 - p0))
+    t = (p1 - p0) / length if length > 0 else np.zeros(2)
+    rx, ry = pos[:, 0] - p0[0], pos[:, 1] - p0[1]
+    along = rx * t[0] + ry * t[1]
+    near = (along >= -radius) & (along <= length + radius)
+    overlap = radius - (rx * n[0] + ry * n[1])
+    return bool(np.all(overlap[near] <= -CLEARANCE * np.spacing(radius[near])))
+
+
+def _face_clear(pos: np.ndarray, radius: np.ndarray, face: float, side: str) -> bool:
+    """Column 0 clear of the solid's face x = face, as `point_overlap` computes it at rest: the
+    gap (face + 0 - x) n_x along n_x = +1 (a medium on the left) or -1 (on the right)."""
+    nx = 1.0 if side == "left" else -1.0
+    gap = (face + 0.0 - pos[:, 0]) * nx
+    return bool(np.all(radius - gap <= -CLEARANCE * np.spacing(radius)))
+
+
+def _spaced(layout, name: str):
+    """layout(lam) -> (pos, radius, walls, pairs, face check or None) with the lattice spaced by
+    R (1 + lam): the first of lam = 0, eps, 2 eps, 4 eps, ... whose contacts all clear (see
+    CLEARANCE)."""
+    for k in range(MAX_SPACINGS):
+        lam = 0.0 if k == 0 else math.ldexp(np.finfo(float).eps, k - 1)
+        pos, radius, walls, pairs, face_ok = layout(lam)
+        if (_pair_clear(pos, radius, pairs) and all(_wall_clear(pos, radius, w) for w in walls)
+                and (face_ok is None or face_ok(pos, radius))):
+            return pos, walls
+    raise ValueError(f"medium {name}: no spacing within {lam:.1e} of its radii clears every contact in floating point")
+
+
+def _touching(pos: np.ndarray, reach: float) -> np.ndarray:
+    """Index pairs (i < j) of centres closer than `reach` (the neighbours of a lattice)."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(pos).query_pairs(reach, output_type="ndarray").reshape(-1, 2)
+
+
 def hexagonal_columns(
     name: str,
     columns: list[int],
@@ -121,7 +185,8 @@ def hexagonal_columns(
     ends of column 0 (bottom and top for left/right growth, left and right for up/down), `outer`
     beyond the last column and `face` on the face line (only for a medium not beside a solid).
     Labels run from the outermost column inward, then along +s (bottom to top, or left to right),
-    as in the paper (1..14 and A..N).
+    as in the paper (1..14 and A..N). Touching granules, walls and the solid's face clear one
+    another by a few ulps in floating point (`CLEARANCE`), so an unloaded medium feels no force.
     """
     grow = side if grow is None else grow
     if side not in ("left", "right", "none"):
@@ -140,41 +205,50 @@ def hexagonal_columns(
         raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
     R = float(radius)
     sgn = -1.0 if grow in ("left", "down") else 1.0
-    local = []  # (u, s) of each column, u the distance from the face
-    for c, count in enumerate(columns):
-        u = R + gap + c * R * math.sqrt(3.0)
-        # s = center + j R with j on column c's lattice (j = n0 - 1 + c mod 2), centred if possible
-        js = [2 * k - (count - 1) for k in range(count)]
-        if (js[0] - (columns[0] - 1 + c)) % 2:
-            js = [j + 1 for j in js]
-        local.append(np.array([[u, center + j * R] for j in js]))
-    us = np.vstack(list(reversed(local)))  # label order: outermost column first, then along +s
+    n = sum(columns)
+    lab = granule_labels(labels, n)
+    contact = list(range(n - columns[0], n))
+    rad = np.full(n, R)
+    lo, hi = channel_names(grow)
+    e_s = (0.0, 1.0) if grow in ("left", "right") else (1.0, 0.0)  # along the face, +s
+    along = (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)  # along the growth
 
     def frame(u, s):  # (u, s) -> (x, y)
         return (face + sgn * u, s) if grow in ("left", "right") else (s, face + sgn * u)
 
-    pos = np.array([frame(u, s) for u, s in us])
-    n = len(pos)
-    lab = granule_labels(labels, n)
-    contact = list(range(n - columns[0], n))
-    u_out = R + gap + (len(columns) - 1) * R * math.sqrt(3.0) + R
-    s_lo, s_hi = float(us[:, 1].min() - R), float(us[:, 1].max() + R)
-    e_s = (0.0, 1.0) if grow in ("left", "right") else (1.0, 0.0)  # along the face, +s
-    along = (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)  # along the growth
-    made = []
-    lo, hi = channel_names(grow)
-    if lo in walls:  # the channel wall at s_lo faces +s, the one at s_hi faces -s
-        made.append((lo, frame(0.0, s_lo), frame(u_out, s_lo), e_s))
-    if hi in walls:
-        made.append((hi, frame(0.0, s_hi), frame(u_out, s_hi), (-e_s[0], -e_s[1])))
-    if "outer" in walls:
-        made.append(("outer", frame(u_out, s_lo), frame(u_out, s_hi), (-along[0], -along[1])))
-    if "face" in walls:
-        made.append(("face", frame(0.0, s_lo), frame(0.0, s_hi), along))
-    out = []
-    for w, a, b, nrm in made:
-        a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
-        out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
+    def layout(lam):
+        Rs = R * (1.0 + lam)  # the lattice's spacing radius (see CLEARANCE)
+        local = []  # (u, s) of each column, u the distance from the face
+        for c, count in enumerate(columns):
+            u = Rs + gap + c * Rs * math.sqrt(3.0)
+            # s = center + j R with j on column c's lattice (j = n0 - 1 + c mod 2), centred if possible
+            js = [2 * k - (count - 1) for k in range(count)]
+            if (js[0] - (columns[0] - 1 + c)) % 2:
+                js = [j + 1 for j in js]
+            local.append(np.array([[u, center + j * Rs] for j in js]))
+        us = np.vstack(list(reversed(local)))  # label order: outermost column first, then along +s
+        pos = np.array([frame(u, s) for u, s in us])
+        u_out = Rs + gap + (len(columns) - 1) * Rs * math.sqrt(3.0) + Rs
+        s_lo, s_hi = float(us[:, 1].min() - Rs), float(us[:, 1].max() + Rs)
+        made = []
+        if lo in walls:  # the channel wall at s_lo faces +s, the one at s_hi faces -s
+            made.append((lo, frame(0.0, s_lo), frame(u_out, s_lo), e_s))
+        if hi in walls:
+            made.append((hi, frame(0.0, s_hi), frame(u_out, s_hi), (-e_s[0], -e_s[1])))
+        if "outer" in walls:
+            made.append(("outer", frame(u_out, s_lo), frame(u_out, s_hi), (-along[0], -along[1])))
+        if "face" in walls:
+            made.append(("face", frame(0.0, s_lo), frame(0.0, s_hi), along))
+        out = []
+        for w, a, b, nrm in made:
+            a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
+            out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
+        face_ok = None
+        if side != "none":  # column 0 against the solid's face
+            face_ok = lambda p, r: _face_clear(p[contact], r[contact], face, side)  # noqa: E731
+        return pos, rad, out, _touching(pos, 2 * R * (1 + 1e-9)), face_ok
+
+    pos, out = _spaced(layout, name)
     return Medium(name, lab, pos, np.full(n, R), material, side, out, contact)
 
 
@@ -193,7 +267,7 @@ def chain(
     along `grow` (as `hexagonal_columns`; centred on `center` along the face), each bead of its
     own material. Labels 1..n run from the far end to the face, as a column's do: label 1 is the
     outermost bead. `walls`: `face` (on the face line, only away from a solid) and `outer`
-    (touching the last bead)."""
+    (touching the last bead). Touching beads and walls clear by a few ulps (`CLEARANCE`)."""
     grow = side if grow is None else grow
     if grow not in GROWTHS:
         raise ValueError(f"grow must be one of {list(GROWTHS)}, got {grow!r}")
@@ -209,29 +283,39 @@ def chain(
     if "face" in walls and side != "none":
         raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has one")
     sgn = -1.0 if grow in ("left", "down") else 1.0
-    u, prev = [], None
-    for r in radii:
-        u.append(gap + r if prev is None else u[-1] + prev + r)
-        prev = r
-    u_out = u[-1] + radii[-1]
+    n = len(radii)
 
     def frame(a, b):  # (distance from the face, position along it) -> (x, y)
         return (face + sgn * a, b) if grow in ("left", "right") else (b, face + sgn * a)
 
-    order = list(reversed(range(len(radii))))  # label 1 = the outermost bead
-    pos = np.array([frame(u[k], center) for k in order])
+    order = list(reversed(range(n)))  # label 1 = the outermost bead
     rad = np.array([float(radii[k]) for k in order])
     mats = [materials[k] for k in order]
     top = max(radii)
-    made = {"face": (frame(0.0, center - top), frame(0.0, center + top), (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)),
-            "outer": (frame(u_out, center - top), frame(u_out, center + top),
-                      (-sgn, 0.0) if grow in ("left", "right") else (0.0, -sgn))}
-    out = []
-    for w in walls:
-        a, b, nrm = made[w]
-        a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
-        out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
-    n = len(radii)
+    links = np.array([[k, k + 1] for k in range(n - 1)], dtype=int).reshape(-1, 2)  # neighbours in label order
+
+    def layout(lam):
+        u, prev = [], None  # each bead's distance from the face, spaced by its radii (1 + lam)
+        for r in radii:
+            u.append(gap + r * (1.0 + lam) if prev is None else u[-1] + (prev + r) * (1.0 + lam))
+            prev = r
+        u_out = u[-1] + radii[-1] * (1.0 + lam)
+        pos = np.array([frame(u[k], center) for k in order])
+        made = {"face": (frame(0.0, center - top), frame(0.0, center + top),
+                         (sgn, 0.0) if grow in ("left", "right") else (0.0, sgn)),
+                "outer": (frame(u_out, center - top), frame(u_out, center + top),
+                          (-sgn, 0.0) if grow in ("left", "right") else (0.0, -sgn))}
+        out = []
+        for w in walls:
+            a, b, nrm = made[w]
+            a, b = sorted((tuple(map(float, a)), tuple(map(float, b))))
+            out.append(Wall(a, b, tuple(float(c) + 0.0 for c in nrm), name, f"{name}:{w}"))
+        face_ok = None
+        if side != "none":  # the bead nearest the face (the last label) against the solid
+            face_ok = lambda p, r: _face_clear(p[-1:], r[-1:], face, side)  # noqa: E731
+        return pos, rad, out, links, face_ok
+
+    pos, out = _spaced(layout, name)
     return Medium(name, numeric_labels(n), pos, rad, mats[0], side, out, [n - 1], mats)
 
 
