@@ -2,8 +2,8 @@
 set another live process is computing waits for it instead of solving it again, and a lock
 whose holder has died is taken over."""
 
+import json
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -11,6 +11,7 @@ import time
 
 import pytest
 
+from granel.guard.owners import process_token
 from granel.solid import modal
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate
 
@@ -23,11 +24,17 @@ def plate(tmp_path, monkeypatch):
     return assemble_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, PlateMesh(2, 2.5, 8e-3))
 
 
+def holder(token: str) -> str:
+    """A lock's text naming the process of `token` as its holder (`modal._lock_text`'s fields)."""
+    pid = int(token.split("-")[1])
+    return json.dumps({"token": token, "host": "here", "pid": pid, "since": time.time(), "what": "test modes"})
+
+
 def test_a_process_waits_for_the_modes_another_is_computing(plate):
     stem = modal._stem(plate, "modes", "")
     lock = stem.with_suffix(".lock")
     lock.parent.mkdir(parents=True)
-    lock.write_text(f"{socket.gethostname()} {os.getpid()}\n")  # a live holder: this process
+    lock.write_text(holder(process_token()))  # a live holder: this process
     got = {}
     waiter = threading.Thread(target=lambda: got.setdefault("modes", modal.all_modes(plate)))
     waiter.start()
@@ -47,7 +54,7 @@ def test_a_lock_whose_holder_died_is_taken_over(plate):
     dead.wait()
     lock = modal._stem(plate, "modes", "").with_suffix(".lock")
     lock.parent.mkdir(parents=True)
-    lock.write_text(f"{socket.gethostname()} {dead.pid}\n")
+    lock.write_text(holder(process_token(dead.pid)))
     modes = modal.all_modes(plate)
     assert modes.origin == "computed" and not lock.exists()
     assert modal.all_modes(plate).origin == "cache"

@@ -12,11 +12,19 @@ compiled kernel outlives the code it was compiled from. The folder is `__pycache
 beside this package when it can be written (as numba's own in-tree cache), else
 `~/.cache/granel/numba/kernels-KEY`; with NUMBA_CACHE_DIR set, `NUMBA_CACHE_DIR/granel-kernels-KEY`.
 Folders of this kind left by older sources are removed, the newest KEEP kept (a checkout that
-switches branches reuses them)."""
+switches branches reuses them).
+
+numba loads whatever it finds in its cache: a truncated or damaged file ends the process (a
+pickle error, or an LLVM assertion and SIGABRT). So each folder numba writes in keeps a manifest
+(`MANIFEST`: every file's size and CRC-32), recorded after numba saves a kernel and its files
+are synced (`_record_kernel`). Before numba loads a kernel, its files are checked against the
+manifest (`_check_kernel`); a kernel with a file the manifest does not know, or that does not
+match it, has its files removed, and numba compiles it again."""
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import tempfile
@@ -117,10 +125,194 @@ def cached_njit(sources, home: Path = PACKAGE):
 
         def apply(fn):
             with _cache_dir(folder()):
-                return deco(fn)
+                return checked(deco(fn))
         return apply
 
     return njit
+
+
+# ---------------------------------------------------------------- the cache's manifest
+
+MANIFEST = "granel-manifest.json"
+MANIFEST_LOCK = ".granel-manifest.lock"
+_MANIFESTS: dict = {}  # folder -> ((device, inode, size, mtime_ns) of its manifest, its files)
+_LISTINGS: dict = {}  # folder -> ((device, inode, mtime_ns) of the folder, its numba files by kernel)
+_NOTED: set = set()
+
+
+def checked(dispatcher):
+    """`dispatcher` (a numba.njit with cache=True) with its cache checked before each load
+    (`_check_kernel`) and recorded after each save (`_record_kernel`). A kernel whose damaged
+    files cannot be removed is compiled without the cache."""
+    cache = getattr(dispatcher, "_cache", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    if index is None:  # no disk cache (numba found no folder to write): nothing to check
+        return dispatcher
+    folder, base = Path(cache._cache_path), Path(index).name.removesuffix(".nbi")
+    load, save = cache.load_overload, cache.save_overload
+
+    def load_overload(sig, target_context):
+        if not _check_kernel(folder, base):
+            cache.disable()
+        return load(sig, target_context)
+
+    def save_overload(sig, data):
+        save(sig, data)
+        _record_kernel(folder, base)
+
+    cache.load_overload, cache.save_overload = load_overload, save_overload
+    return dispatcher
+
+
+def _kernel_files(folder: Path, base: str) -> list[Path]:
+    """The cache files numba keeps for the kernel `base`: its index BASE.nbi and its data files
+    BASE.N.nbc, those present (from the folder's listing, read again when the folder changed,
+    and probed by name)."""
+    names = set(_listing(folder).get(base, ()))
+    names.add(f"{base}.nbi")
+    number = 1
+    while (folder / f"{base}.{number}.nbc").exists():
+        names.add(f"{base}.{number}.nbc")
+        number += 1
+    return [folder / n for n in sorted(names) if (folder / n).exists()]
+
+
+def _listing(folder: Path) -> dict:
+    """{kernel: its file names} of the numba files in `folder`, kept while the folder is unchanged."""
+    try:
+        st = os.stat(folder)
+        stamp = (st.st_dev, st.st_ino, st.st_mtime_ns)
+        held = _LISTINGS.get(folder)
+        if held is not None and held[0] == stamp:
+            return held[1]
+        kernels: dict = {}
+        for entry in os.scandir(folder):
+            name = entry.name
+            if name.endswith(".nbi"):
+                kernels.setdefault(name[:-4], []).append(name)
+            elif name.endswith(".nbc"):
+                base, _, number = name[:-4].rpartition(".")
+                if number.isdigit():
+                    kernels.setdefault(base, []).append(name)
+    except OSError:
+        return {}
+    _LISTINGS[folder] = (stamp, kernels)
+    return kernels
+
+
+def _crc32(path: Path) -> tuple[int, int]:
+    from .guard.fingerprints import file_crc32
+
+    return file_crc32(path)
+
+
+def _manifest(folder: Path) -> dict:
+    """The manifest of `folder` ({name: [size, crc32]}; empty when missing or unreadable), read
+    again only when it changed."""
+    path = folder / MANIFEST
+    try:
+        st = os.stat(path)
+    except OSError:
+        return {}
+    stamp = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    held = _MANIFESTS.get(folder)
+    if held is not None and held[0] == stamp:
+        return held[1]
+    try:
+        files = json.loads(path.read_text())["files"]
+        files = {str(k): [int(v[0]), int(v[1])] for k, v in files.items()}
+    except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError):
+        files = {}
+    _MANIFESTS[folder] = (stamp, files)
+    return files
+
+
+def _check_kernel(folder: Path, base: str) -> bool:
+    """Check the cached files of kernel `base` against the manifest; if one is unknown to it or
+    does not match it, remove them all (numba then compiles the kernel again) with a note.
+    False if they cannot be removed."""
+    files = _kernel_files(folder, base)
+    if not files:
+        return True
+    known = _manifest(folder)
+    why = None
+    for f in files:
+        entry = known.get(f.name)
+        try:
+            got = list(_crc32(f))
+        except OSError as e:
+            got, why = None, f"cannot be read ({e.strerror or e})"
+        if why is None and entry is None:
+            why = "is not in the cache's manifest" if known else "has no manifest beside it"
+        elif why is None and got[0] != entry[0]:
+            why = f"holds {got[0]} bytes, the manifest {entry[0]}"
+        elif why is None and got[1] != entry[1]:
+            why = "does not match its checksum in the manifest"
+        if why:
+            break
+    if why is None:
+        return True
+    removed = True
+    for g in files:
+        try:
+            g.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:
+            removed = False
+    _note(("damaged", folder), f"compiled-kernel cache: {folder / f.name} {why}; "
+          + ("its kernel's files removed, and numba compiles it again" if removed else
+             "they cannot be removed, so the kernel is compiled without the cache"))
+    return removed
+
+
+def _note(key, message: str) -> None:
+    """`message` as a warning (one line on the command line), once per process for `key`."""
+    import warnings
+
+    if key not in _NOTED:
+        _NOTED.add(key)
+        warnings.warn(message, stacklevel=3)
+
+
+@contextmanager
+def _manifest_lock(folder: Path):
+    """An exclusive lock on the folder's manifest (released when the process ends, whatever
+    ends it); none where the system has no flock."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(folder / MANIFEST_LOCK, os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _record_kernel(folder: Path, base: str) -> None:
+    """Sync the cached files of kernel `base` (numba does not), then record their sizes and
+    checksums in the folder's manifest, merged with what other processes recorded there, and
+    sync that. A manifest that cannot be written leaves the kernel unrecorded: the next process
+    compiles it again."""
+    from .guard.writing import fsync_path, write_text
+
+    try:
+        with _manifest_lock(folder):
+            _MANIFESTS.pop(folder, None)
+            files = dict(_manifest(folder))
+            for f in _kernel_files(folder, base):
+                fsync_path(f)
+                files[f.name] = list(_crc32(f))
+            fsync_path(folder)  # numba's renames
+            files = {name: v for name, v in files.items() if (folder / name).exists()}
+            write_text(folder / MANIFEST, json.dumps({"format": 1, "numba": numba.__version__, "files": files},
+                                                     indent=0, sort_keys=True) + "\n")
+    except OSError as e:
+        _note(("unwritable", folder), f"compiled-kernel cache: {folder / MANIFEST} cannot be written "
+              f"({e.strerror or e}); the next process compiles the kernels compiled here again")
 
 
 njit = cached_njit(KERNEL_SOURCES)

@@ -12,13 +12,14 @@ order and bulk modes.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
-
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..guard.fingerprints import file_crc32
 from .base import SolidModel
 
 
@@ -135,14 +136,14 @@ def classify_modes(model: SolidModel, modes: Modes, which=None) -> list[str]:
 
 
 def cache_dir():
+    """granel's cache folder: GRANEL_CACHE, or ~/.cache/granel when it is unset or empty."""
     import os
-    from pathlib import Path
 
-    return Path(os.environ.get("GRANEL_CACHE", Path.home() / ".cache" / "granel"))
+    return Path(os.environ.get("GRANEL_CACHE") or Path.home() / ".cache" / "granel")
 
 
 # granel's own cache files (modes, modes below a cut-off, their scale-free records, assembled
-# plates): the only files pruning removes
+# plates): the only files pruning removes, each with its check record (`CHECK_SUFFIX`)
 CACHE_PATTERNS = ("modes-*.omega.npy", "modes-*.shapes.npy", "modes-*.scale.npz", "plate-*.npz")
 CACHE_LIMIT = 2 * 1024**3  # bytes, unless GRANEL_CACHE_LIMIT says otherwise
 
@@ -164,10 +165,11 @@ def cache_limit() -> int:
 
 def prune_cache(keep=(), limit: int | None = None) -> list:
     """Remove the least recently used of granel's cache files (CACHE_PATTERNS; a cache hit
-    touches its files) until the cache holds at most `limit` bytes (`cache_limit()`), never the
-    files in `keep` (the ones just written or read). A design study meets a new plate at every
-    trial (about 100 MB of modes each): without a bound the cache would grow without end.
-    Returns the removed paths; files it cannot remove are left."""
+    touches its files), each with its check record, until the cache holds at most `limit` bytes
+    (`cache_limit()`), never the files in `keep` (the ones just written or read). A design study
+    meets a new plate at every trial (about 100 MB of modes each): without a bound the cache
+    would grow without end. Check records left without their file go too. Returns the removed
+    files (not their records); files it cannot remove are left."""
     limit = cache_limit() if limit is None else limit
     folder = cache_dir()
     files = []
@@ -177,7 +179,14 @@ def prune_cache(keep=(), limit: int | None = None) -> list:
                 st = f.stat()
             except OSError:
                 continue
-            files.append((st.st_mtime, st.st_size, f))
+            try:
+                extra = _check_path(f).stat().st_size
+            except OSError:
+                extra = 0
+            files.append((st.st_mtime, st.st_size + extra, f))
+        for record in folder.glob(pattern + CHECK_SUFFIX):
+            if not record.with_name(record.name.removesuffix(CHECK_SUFFIX)).exists():
+                _unlink(record)
     total = sum(size for _, size, _ in files)
     keep = {Path(k).resolve() for k in keep}
     removed = []
@@ -190,19 +199,17 @@ def prune_cache(keep=(), limit: int | None = None) -> list:
             f.unlink()
         except OSError:
             continue
+        _unlink(_check_path(f))
         total -= size
         removed.append(f)
     return removed
 
 
-def _touch(*paths) -> None:
-    import os
-
-    for p in paths:
-        try:
-            os.utime(p)
-        except OSError:
-            pass
+def _unlink(path) -> None:
+    try:
+        path.unlink()
+    except OSError:
+        pass
 
 
 def all_modes(model: SolidModel) -> Modes:
@@ -211,7 +218,8 @@ def all_modes(model: SolidModel) -> Modes:
     contacts (`at_dofs`), a field plot the whole matrix. A solid whose K and M are those of a
     cached one times two scalars (another thickness, Young's modulus or density of the same
     plate) gets that solid's modes scaled (`scaled_modes`), with no eigen-solve."""
-    return _cached(model, "modes", "", lambda: modal_analysis(model, None), mmap=True)
+    what = f"the modes of a {model.kind} of {model.ndof} DOFs"
+    return _cached(model, "modes", "", lambda: modal_analysis(model, None), mmap=True, what=what)
 
 
 def modes_below(model: SolidModel, f_cut: float, max_count: int | None = None) -> Modes:
@@ -233,32 +241,43 @@ def modes_below(model: SolidModel, f_cut: float, max_count: int | None = None) -
         keep = modes.omega <= w_cut
         return Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
 
-    return _cached(model, "modes-below", repr((float(f_cut), max_count)), compute, mmap=False, wanted=(w_cut, top))
+    what = f"the modes below {f_cut / 1e6:.4g} MHz of a {model.kind} of {model.ndof} DOFs"
+    return _cached(model, "modes-below", repr((float(f_cut), max_count)), compute, mmap=False, wanted=(w_cut, top),
+                   what=what)
 
 
-def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wanted=(np.inf, None)) -> Modes:
+def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wanted=(np.inf, None),
+            what="modes") -> Modes:
     """Modes from the disk cache (by a hash of M, K and `key`), or scaled from the cached modes
-    of a proportional solid (`scaled_modes`), or `compute()` and store them (atomically; without
-    a writable cache they are simply recomputed next time). `wanted` = (w_cut [rad/s], most
-    modes): what `compute` returns, the lowest modes up to w_cut, at most that many (None: no
-    bound); all modes by default. Each stored set gets a scale-free record (`_write_record`).
-    Only one process computes a given set at a time (`_acquire`): the others wait for it."""
+    of a proportional solid (`scaled_modes`), or `compute()` and store them. Only files that match
+    their check records are used (`_verify`): a damaged entry is computed again, with a note.
+    `wanted` = (w_cut [rad/s], most modes): what `compute` returns, the lowest modes up to w_cut,
+    at most that many (None: no bound); all modes by default. Each stored set gets a scale-free
+    record (`_write_record`). Only one process computes a given set at a time (`_acquire`): the
+    others wait for it, within a bound (`_wait_for`). Without a writable cache the modes are
+    computed, with a note, and nothing is stored."""
     stem = _stem(model, prefix, key)
     free = _scale_free(model)
     lock = stem.with_suffix(".lock")
     while True:
-        modes = _from_cache(model, stem, free, wanted, mmap)
+        modes, damage = _from_cache(model, stem, free, wanted, mmap)
         if modes is None and free is not None:
-            modes = scaled_modes(model, prefix, free, wanted, mmap)
+            modes = scaled_modes(model, prefix, free, wanted, mmap, exclude=stem)
         if modes is not None:
             return modes
-        held = _acquire(lock)
-        if held is False:  # another process is computing these modes: wait for them
-            _wait_for(lock)
-            continue
+        held = _acquire(lock, what)
+        if held is False and _wait_for(lock, what):
+            continue  # released, or its holder is gone: look again
         try:
+            if held:  # stored by another process while this one waited for the lock
+                modes, damage = _from_cache(model, stem, free, wanted, mmap)
+                if modes is not None:
+                    return modes
+            if damage:
+                _note(("rebuilt", stem), f"cache: {damage}; computing {what} again")
             modes = compute()
-            _store(model, stem, free, wanted, modes)
+            if held is not False:  # a live holder that outlasted the wait stores its own
+                _store(model, stem, free, wanted, modes)
         finally:
             if held:
                 _release(lock)
@@ -278,119 +297,368 @@ def _stem(model: SolidModel, prefix: str, key: str) -> Path:
     return cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
 
 
-def _from_cache(model: SolidModel, stem: Path, free, wanted, mmap: bool) -> Modes | None:
-    """The solid's own modes from the cache files at `stem`, or None (absent or damaged)."""
+def _from_cache(model: SolidModel, stem: Path, free, wanted, mmap: bool) -> tuple[Modes | None, str | None]:
+    """(the solid's own modes from the cache files at `stem`, None), or (None, what is wrong
+    with them) for a damaged entry, or (None, None) without one."""
     omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
     if not (omega_path.exists() and shapes_path.exists()):
-        return None
+        return None, None
+    for path in (omega_path, shapes_path):
+        damage = _verify(path)
+        if damage:
+            return None, damage
     try:
         omega = np.load(omega_path)
         shapes = np.load(shapes_path, mmap_mode="r" if mmap else None)
-        if shapes.shape != (model.ndof, len(omega)):
-            return None
-        _touch(omega_path, shapes_path)  # recently used: pruned last
-        if free is not None:
-            record = _record_path(stem)
-            if record.exists():
-                _touch(record)
-            else:  # a set cached before the records: it becomes a base too
+    except (OSError, ValueError, EOFError) as e:  # matches its record, yet unreadable: written so
+        return None, f"{shapes_path.name} cannot be read ({type(e).__name__})"
+    if shapes.shape != (model.ndof, len(omega)):
+        return None, f"{shapes_path.name} holds {shapes.shape} shapes, not ({model.ndof}, {len(omega)})"
+    _used(omega_path, shapes_path)  # recently used: pruned last
+    if free is not None:
+        record = _record_path(stem)
+        damage = _verify(record) if record.exists() else None
+        if damage:
+            _note(("rebuilt", record), f"cache: {damage}; writing it again")
+        if damage or not record.exists():  # lost or damaged on its own: written again from this solid
+            try:
                 _write_record(stem, free, omega, model.ndof, wanted)
-        return Modes(omega, shapes, "cache")
-    except (OSError, ValueError):
-        return None  # a damaged cache file is recomputed and replaced
+            except OSError as e:
+                _unwritable(stem.parent, e)
+        else:
+            _used(record)
+    return Modes(omega, shapes, "cache"), None
 
 
 def _store(model: SolidModel, stem: Path, free, wanted, modes: Modes) -> None:
-    """Computed modes into the cache (atomically), with their scale-free record; nothing if the
-    cache is not writable."""
+    """Computed modes into the cache (each file atomically, synced, then its check record), with
+    their scale-free record; a note and nothing else if the cache cannot be written."""
     omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
     try:
-        stem.parent.mkdir(parents=True, exist_ok=True)
-        _save_atomic(shapes_path, modes.shapes)
-        _save_atomic(omega_path, modes.omega)
+        _write_checked(shapes_path, modes.shapes)
+        _write_checked(omega_path, modes.omega)
         kept = [omega_path, shapes_path]
         if free is not None:
             kept.append(_write_record(stem, free, modes.omega, model.ndof, wanted))
         prune_cache(keep=kept)
+    except OSError as e:
+        _unwritable(stem.parent, e)
+
+
+# ---------------------------------------------------------------- checked cache files
+#
+# Every cache file (a set's frequencies and shapes, its scale-free record, an assembled plate)
+# has a check record beside it, FILE.sum: the file's byte size and CRC-32, written once the file
+# is synced and renamed into place (`guard.writing.atomic_path`), and synced itself. A file is
+# used only when its record is there and matches it; otherwise its entry counts as damaged and is
+# built again. The size catches truncation; the CRC catches zero-filled blocks and flipped
+# bytes (every burst of up to 32 bits, other damage but for 1 in 2^32). The CRC of a file is
+# computed once per process: a file checked before, with the same device, inode, size and
+# modification time, is not read again (`_CHECKED`).
+
+CHECK_SUFFIX = ".sum"
+CHECK_FORMAT = 1
+
+_CHECKED: dict = {}  # path -> (device, inode, size, mtime_ns, crc) of a file that matched its record
+_NOTED: set = set()
+
+
+class CacheNote(UserWarning):
+    """A note about granel's disk cache: an entry damaged and built again, a cache that cannot be
+    written, a wait for another process's computation."""
+
+
+def _note(key, message: str) -> None:
+    """`message` as a warning (one line on the command line), once per process for `key`."""
+    import warnings
+
+    if key in _NOTED:
+        return
+    _NOTED.add(key)
+    warnings.warn(message, CacheNote, stacklevel=3)
+
+
+def _unwritable(folder: Path, e: BaseException) -> None:
+    """Note, once per folder, that the cache cannot be written there, and why."""
+    from ..guard.exits import FileError
+
+    if folder.exists() and not folder.is_dir():
+        why = "it is a file, not a folder"
+    elif isinstance(e, FileError):
+        why = str(e)
+    else:
+        why = getattr(e, "strerror", None) or str(e)
+    _note(("unwritable", str(folder)), f"cache: {folder} cannot be written ({why}); computing without the cache")
+
+
+def _check_path(path: Path) -> Path:
+    return path.with_name(path.name + CHECK_SUFFIX)
+
+
+def _verify(path: Path) -> str | None:
+    """What is wrong with the cache file at `path` (one line naming it), or None: it matches its
+    check record."""
+    import json
+    import os
+
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        return f"{path.name} cannot be read ({e.strerror or e})"
+    try:
+        record = json.loads(_check_path(path).read_text())
+        size, crc = int(record["size"]), int(record["crc32"])
+    except FileNotFoundError:
+        return f"{path.name} has no check record"
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"{path.name}: its check record cannot be read"
+    if st.st_size != size:
+        return f"{path.name} holds {st.st_size} bytes, its record {size}"
+    known = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, crc)
+    if _CHECKED.get(str(path)) == known:
+        return None
+    try:
+        _, got = file_crc32(path)
+    except OSError as e:
+        return f"{path.name} cannot be read ({e.strerror or e})"
+    if got != crc:
+        return f"{path.name}: its checksum differs from its record (damaged content)"
+    _CHECKED[str(path)] = known
+    return None
+
+
+def _used(*paths) -> None:
+    """Touch cache files that were used (pruning removes the least recently used first),
+    keeping their memo of a passed check (the touch changes their modification time)."""
+    import os
+
+    for p in paths:
+        for f in (p, _check_path(p)):
+            try:
+                os.utime(f)
+            except OSError:
+                continue
+        known = _CHECKED.get(str(p))
+        if known is not None:
+            try:
+                st = os.stat(p)
+            except OSError:
+                continue
+            if known[:3] == (st.st_dev, st.st_ino, st.st_size):
+                _CHECKED[str(p)] = (*known[:3], st.st_mtime_ns, known[4])
+
+
+def _write_npy(path, array) -> None:
+    """np.save `array` (np.savez for a dict of arrays) to the file at `path`."""
+    with open(path, "wb") as fh:
+        if isinstance(array, dict):
+            np.savez(fh, **array)
+        else:
+            np.save(fh, array)
+
+
+def _write_checked(path: Path, array) -> Path:
+    """`array` (or a dict of arrays) to the cache file `path`: written to a temporary, synced
+    and renamed (`guard.writing.atomic_path`; a full disk raises FileError), then its check
+    record (size and CRC-32 of what was written), synced too. Raises OSError when the cache
+    cannot be written."""
+    import json
+    import os
+
+    from ..guard.owners import process_token
+    from ..guard.writing import atomic_path, write_text
+
+    with atomic_path(path) as tmp:
+        _write_npy(tmp, array)
+        size, crc = file_crc32(tmp)
+    write_text(_check_path(path), json.dumps({"format": CHECK_FORMAT, "file": path.name, "size": size, "crc32": crc,
+                                              "by": process_token()}) + "\n")
+    try:
+        st = os.stat(path)
+        _CHECKED[str(path)] = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, crc)
     except OSError:
         pass
+    return path
+
+
+def _discard(paths, damage: str, busy: Path | None = None) -> None:
+    """Remove a damaged cache entry (its files and their check records) with a note, unless
+    `busy` (its lock) exists: its holder may be writing it now."""
+    if busy is not None and busy.exists():
+        return
+    for p in paths:
+        _unlink(p)
+        _unlink(_check_path(p))
+    _note(("removed", str(paths[0])), f"cache: {damage}; removed")
 
 
 # ---------------------------------------------------------------- one computation at a time
 #
 # Workers of a sweep or a design study that meet the same new solid at once would each solve it
 # (a plate's modes take seconds of both cores): the first takes a lock file beside the cache
-# entry, and the others wait for its modes. A lock whose holder has died (its process gone on
-# this host, or the lock older than LOCK_STALE_S) is taken over, so a killed run leaves nobody
-# waiting.
+# entry, naming itself by `guard.owners.process_token` (host, pid and the process's start time),
+# and the others wait for its modes. A lock whose holder is dead (its process gone on this host,
+# or its pid now another process's) is taken over at once. A lock of another host cannot be
+# asked: it is taken over when older than LOCK_WAIT_S. A wait says once what it waits for, and
+# ends at LOCK_WAIT_S after the lock was taken: the waiter then computes the modes itself
+# (without storing them: the live holder will). LOCK_WAIT_S is the longest a solve under the
+# lock is given: the dense solve of a solid at DENSE_LIMIT DOFs costs (8000 / 3584)^3 = 11 times
+# the paper plate's 13 s of one core, about 2.5 minutes, 10 on a loaded machine; a wrong guess
+# costs one extra solve, never a wrong result.
 
-LOCK_STALE_S = 1800.0
+LOCK_WAIT_S = 600.0
+LOCK_WRITE_S = 10.0  # an unreadable lock younger than this may be being written
 LOCK_POLL_S = 0.25
 
 
-def _acquire(lock: Path) -> bool | None:
-    """True: this process holds `lock`; False: a live holder has it; None: no lock can be taken
-    (an unwritable cache), and the caller computes without one."""
+@dataclass
+class _Holder:
+    """What a lock file says about its holder."""
+
+    text: str
+    age: float  # seconds since the lock file was written (its modification time)
+    token: str | None = None  # None: unreadable (being written, or left half-written)
+    host: str = "?"
+    pid: int = 0
+    since: float = 0.0  # when the lock was taken (the holder's clock)
+    what: str = ""
+
+
+def _lock_text(what: str) -> str:
+    import json
     import os
     import socket
+    import time
 
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError:
-        if _stale(lock):
-            _release(lock)
-            return _acquire(lock)
-        return False
-    except OSError:
-        return None
-    with os.fdopen(fd, "w") as fh:
-        fh.write(f"{socket.gethostname()} {os.getpid()}\n")
-    return True
+    from ..guard.owners import process_token
+
+    return json.dumps({"token": process_token(), "host": socket.gethostname(), "pid": os.getpid(),
+                       "since": time.time(), "what": what}) + "\n"
 
 
-def _stale(lock: Path) -> bool:
-    """The lock's holder is gone: its process no longer runs on this host, or the lock is older
-    than LOCK_STALE_S (a holder on another host of a shared cache)."""
-    import os
-    import socket
+def _holder(lock: Path) -> _Holder | None:
+    """The lock's holder, or None when there is no lock (or it cannot be read)."""
+    import json
     import time
 
     try:
         age = time.time() - lock.stat().st_mtime
         text = lock.read_text()
-    except OSError:
-        return False  # just released: look again
+    except (OSError, UnicodeDecodeError):
+        return None
     try:
-        host, pid = text.split()
-    except ValueError:
-        return age > 10.0  # being written, or left empty by a holder killed as it wrote
-    if age > LOCK_STALE_S:
+        d = json.loads(text)
+        return _Holder(text, age, str(d["token"]), str(d["host"]), int(d["pid"]), float(d["since"]), str(d["what"]))
+    except (ValueError, KeyError, TypeError):
+        return _Holder(text, age)
+
+
+def _stale(holder: _Holder) -> bool:
+    """The lock's holder is gone: its token is dead (`guard.owners.token_state`), the lock is
+    unreadable and older than LOCK_WRITE_S, or it is another host's and older than LOCK_WAIT_S."""
+    from ..guard.owners import token_state
+
+    if holder.token is None:
+        return holder.age > LOCK_WRITE_S
+    state = token_state(holder.token)
+    return state == "dead" or (state == "elsewhere" and holder.age > LOCK_WAIT_S)
+
+
+def _acquire(lock: Path, what: str = "modes") -> bool | None:
+    """True: this process holds `lock`; False: another holder has it; None: no lock can be taken
+    (an unwritable cache, noted), and the caller computes without one. A stale lock is taken
+    over."""
+    import os
+
+    for _ in range(3):
+        try:
+            lock.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            if not lock.parent.is_dir():
+                _unwritable(lock.parent, NotADirectoryError())
+                return None
+            holder = _holder(lock)
+            if holder is not None and _stale(holder):
+                if not _take_over(lock, holder):
+                    _note(("lock", str(lock)), f"cache: the stale lock {lock} cannot be removed; computing {what} "
+                          "without it")
+                    return None
+                continue
+            return False
+        except OSError as e:
+            _unwritable(lock.parent, e)
+            return None
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(_lock_text(what))
+                fh.flush()
+                os.fsync(fh.fileno())
+        except OSError as e:  # a full disk: no lock, no cache
+            _unlink(lock)
+            _unwritable(lock.parent, e)
+            return None
         return True
-    if host != socket.gethostname():
-        return False
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return True
-    except (PermissionError, ValueError):
-        return False
     return False
 
 
-def _wait_for(lock: Path) -> None:
-    """Until `lock` is released or stale."""
+def _take_over(lock: Path, holder: _Holder) -> bool:
+    """Remove a stale lock if it still says what it said when judged stale; False if it cannot
+    be removed."""
+    try:
+        if lock.read_text() == holder.text:
+            lock.unlink()
+    except (FileNotFoundError, UnicodeDecodeError):
+        pass  # released or replaced meanwhile: look again
+    except OSError:
+        return False
+    return True
+
+
+def _wait_for(lock: Path, what: str = "modes") -> bool:
+    """Wait until `lock` is released or stale (True: look again), or until LOCK_WAIT_S after
+    it was taken (False: compute without it). Says once what it waits for, and for whom."""
     import time
 
-    while lock.exists() and not _stale(lock):
+    from ..guard.owners import token_state
+
+    start = time.time()
+    noted = False
+    while True:
+        holder = _holder(lock)
+        if holder is None:
+            if not lock.exists():
+                return True
+            _note(("lock", str(lock)), f"cache: the lock {lock} cannot be read; computing {what} without it")
+            return False
+        if _stale(holder):
+            return True
+        since = holder.since if holder.token is not None and holder.since < start else start
+        until = since + LOCK_WAIT_S
+        now = time.time()
+        if not noted and holder.token is not None:
+            noted = True
+            where = "this host" if token_state(holder.token) == "alive" else f"host {holder.host}"
+            clock = lambda t: time.strftime("%H:%M:%S", time.localtime(t))  # noqa: E731
+            if now >= until:
+                _note(("outlasted", str(lock)), f"cache: process {holder.pid} on {where} has been computing {what} "
+                      f"since {clock(holder.since)}, longer than {LOCK_WAIT_S:.0f} s; computing them here too")
+                return False
+            _note(("waiting", str(lock), holder.token), f"cache: waiting for {what} ({lock.stem}), which process "
+                  f"{holder.pid} on {where} has been computing since {clock(holder.since)}; "
+                  f"at most until {clock(until)}")
+        if now >= until:
+            return False
         time.sleep(LOCK_POLL_S)
 
 
 def _release(lock: Path) -> None:
-    try:
-        lock.unlink()
-    except OSError:
-        pass
+    """Remove `lock` if this process holds it."""
+    from ..guard.owners import process_token
+
+    holder = _holder(lock)
+    if holder is not None and holder.token == process_token():
+        _unlink(lock)
 
 
 # ---------------------------------------------------------------- modes of a proportional solid
@@ -439,9 +707,9 @@ def _record_path(stem: Path) -> Path:
 
 
 def _write_record(stem: Path, free: _ScaleFree, omega: np.ndarray, ndof: int, wanted) -> Path:
-    """Store the scale-free record of the modes at `stem`: the normalised matrices, their traces
-    and how far the set is complete (`complete_to` [rad/s]: every mode up to it is in the set;
-    infinite for all modes)."""
+    """Store the scale-free record of the modes at `stem` (a checked cache file): the normalised
+    matrices, their traces and how far the set is complete (`complete_to` [rad/s]: every mode up
+    to it is in the set; infinite for all modes). Raises OSError when it cannot be written."""
     w_cut, top = wanted
     if len(omega) >= ndof:
         complete = np.inf
@@ -452,12 +720,7 @@ def _write_record(stem: Path, free: _ScaleFree, omega: np.ndarray, ndof: int, wa
     arrays = dict(traces=np.array([free.k_trace, free.m_trace]), complete_to=np.array(complete))
     for name, A in (("k", free.k), ("m", free.m)):
         arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr})
-    path = _record_path(stem)
-    try:
-        _save_atomic(path, arrays)
-    except OSError:
-        pass
-    return path
+    return _write_checked(_record_path(stem), arrays)
 
 
 def _same_up_to_scale(a: sp.csr_matrix, z, name: str) -> bool:
@@ -467,26 +730,40 @@ def _same_up_to_scale(a: sp.csr_matrix, z, name: str) -> bool:
     return scale > 0 and float(abs(a - b).max()) <= SCALE_TOL * scale
 
 
-def scaled_modes(model: SolidModel, prefix: str, free: _ScaleFree, wanted, mmap: bool) -> Modes | None:
+def scaled_modes(model: SolidModel, prefix: str, free: _ScaleFree, wanted, mmap: bool, exclude: Path | None = None
+                 ) -> Modes | None:
     """The modes of `model` from a cached set (`prefix`: "modes" or "modes-below") of a solid with
     K0 = K / a and M0 = M / b, or None. a and b are the ratios of the traces; omega = sqrt(a / b)
     omega0 and the shapes phi0 / sqrt(b), which stay memory-mapped (`ScaledShapes`) when `mmap`.
     A set of modes below a cut-off serves when it reaches the wanted cut-off (in its own
-    frequencies) or holds the wanted count below it. Nothing new is written."""
+    frequencies) or holds the wanted count below it. Only checked files serve (`_verify`); a
+    damaged set is removed. `exclude`: the stem of the solid's own entry, not a base. Nothing new
+    is written."""
     w_cut, top = wanted
     for record in sorted(cache_dir().glob(f"{prefix}-{model.kind}-{model.ndof}-*.scale.npz")):
         stem = record.with_name(record.name.removesuffix(".scale.npz"))
         omega_path, shapes_path = stem.with_suffix(".omega.npy"), stem.with_suffix(".shapes.npy")
+        if stem == exclude or not (omega_path.exists() and shapes_path.exists()):
+            continue  # a half-pruned entry: not a base
+        files = [omega_path, shapes_path, record]
+        damage = _verify(record)  # the small record first: the shapes are read only for a match
+        if damage:  # never a base; removed unless its lock says it is being written
+            _discard(files, damage, busy=stem.with_suffix(".lock"))
+            continue
         try:
             with np.load(record) as z:
                 if not (_same_up_to_scale(free.k, z, "k") and _same_up_to_scale(free.m, z, "m")):
                     continue
                 k_trace, m_trace = (float(t) for t in z["traces"])
                 complete = float(z["complete_to"])
+            damage = _verify(omega_path) or _verify(shapes_path)
+            if damage:
+                _discard(files, damage, busy=stem.with_suffix(".lock"))
+                continue
             omega0 = np.load(omega_path)
             shapes0 = np.load(shapes_path, mmap_mode="r" if mmap else None)
-        except (OSError, ValueError, KeyError):
-            continue  # a damaged or half-removed entry: not a base
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            continue  # removed meanwhile, or unreadable though it matches its record: not a base
         if shapes0.shape != (model.ndof, len(omega0)) or not (k_trace > 0 and m_trace > 0):
             continue
         a, b = free.k_trace / k_trace, free.m_trace / m_trace
@@ -499,7 +776,7 @@ def scaled_modes(model: SolidModel, prefix: str, free: _ScaleFree, wanted, mmap:
             n = top
         else:
             continue  # the base stops short of the wanted cut-off
-        _touch(omega_path, shapes_path, record)
+        _used(omega_path, shapes_path, record)
         omega = omega0[:n] * c
         factor = 1.0 / np.sqrt(b)
         part = shapes0 if n == shapes0.shape[1] else shapes0[:, :n]
@@ -561,23 +838,6 @@ class ScaledShapes(np.lib.mixins.NDArrayOperatorsMixin):
 
     def astype(self, dtype, copy=True) -> np.ndarray:
         return np.asarray(self).astype(dtype)
-
-
-def _save_atomic(path, array) -> None:
-    """np.save `array` (np.savez for a dict of arrays) to `path` through a temporary file."""
-    import os
-
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            if isinstance(array, dict):
-                np.savez(fh, **array)
-            else:
-                np.save(fh, array)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def at_dofs(B, shapes, columns=slice(None)) -> np.ndarray:

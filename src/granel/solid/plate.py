@@ -191,11 +191,15 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
     scaled (K by E h, M by rho h, the element volumes by h; `_scaled_plate`)."""
     args = (x0, y0, width, length, thickness, E, nu, rho, tuple(layers), mesh, tuple(clamped))
     path = _plate_cache_path(args)
-    model = _load_plate(path, args)
+    model, damage = _load_plate(path, args)
     if model is None:
         model = _scaled_plate(path, args)
         if model is None:
             model = assemble_plate(*args)
+        if damage:
+            from .modal import _note
+
+            _note(("rebuilt", path), f"cache: {damage}; the plate is built again")
         _save_plate(path, model, args)
     return model
 
@@ -219,9 +223,11 @@ def _plate_cache_path(args):
 
 
 def _save_plate(path, model: SolidModel, args) -> None:
-    """The assembled arrays of a plate model (atomically; a cache that cannot be written is skipped)."""
+    """The assembled arrays of a plate model into the cache, a checked cache file
+    (`modal._write_checked`); a cache that cannot be written is skipped with a note."""
     import json
-    import os
+
+    from .modal import _unwritable, _write_checked, prune_cache
 
     thickness, E, rho = args[4], args[5], args[7]
     arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
@@ -232,44 +238,47 @@ def _save_plate(path, model: SolidModel, args) -> None:
         A = A.tocsr()
         arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr,
                        f"{name}_shape": np.array(A.shape)})
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-        from .modal import prune_cache
-
+        _write_checked(path, arrays)
         prune_cache(keep=(path,))
-    except OSError:
-        pass
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    except OSError as e:
+        _unwritable(path.parent, e)
 
 
 def _scaled_plate(path, args) -> SolidModel | None:
     """The plate of `args` from a cached plate of the same family (`_scale_free_args`) at another
     thickness h0, modulus E0 and density rho0: K (E h) / (E0 h0), M (rho h) / (rho0 h0), element
-    volumes h / h0; nothing else of the assembly depends on them. None without such a plate."""
+    volumes h / h0; nothing else of the assembly depends on them. None without such a plate; a
+    damaged one is removed."""
+    from .modal import _discard
+
     thickness, E, rho = args[4], args[5], args[7]
     family = path.name.split("-")[1]
     for other in sorted(path.parent.glob(f"plate-{family}-*.npz")):
         if other == path:
             continue
-        model = _load_plate(other, args, scales=(thickness, E, rho))
+        model, damage = _load_plate(other, args, scales=(thickness, E, rho))
         if model is not None:
             return model
+        if damage:
+            _discard([other], damage)
     return None
 
 
-def _load_plate(path, args, scales=None) -> SolidModel | None:
-    """The cached plate of these arguments, or None (missing or unreadable cache). `scales`
-    (thickness, E, rho): the plate at `path` is one of the same family, scaled to these."""
+def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]:
+    """(the cached plate of these arguments, None), or (None, what is wrong with the cache file)
+    for a damaged one, or (None, None) without one. `scales` (thickness, E, rho): the plate at
+    `path` is one of the same family, scaled to these."""
     import json
+    import zipfile
+
+    from .modal import _used, _verify
 
     if not path.exists():
-        return None
+        return None, None
+    damage = _verify(path)
+    if damage:
+        return None, damage
     try:
         with np.load(path) as z:
             mats = {n: sp.csr_matrix((z[f"{n}_data"], z[f"{n}_indices"], z[f"{n}_indptr"]), shape=tuple(z[f"{n}_shape"]))
@@ -280,24 +289,22 @@ def _load_plate(path, args, scales=None) -> SolidModel | None:
             nodes, elements, volume, node_dofs = z["nodes"], z["elements"], z["volume"], z["node_dofs"]
             if scales is not None:
                 if str(z["family"]) != repr(_scale_free_args(args)):
-                    return None
+                    return None, None
                 (h0, E0, rho0), (h, E, rho) = z["scales"], scales
                 if not (h0 > 0 and E0 > 0 and rho0 > 0):
-                    return None
+                    return None, None
                 mats["K"] = mats["K"] * ((E * h) / (E0 * h0))
                 mats["M"] = mats["M"] * ((rho * h) / (rho0 * h0))
                 volume = volume * (h / h0)
-    except (OSError, ValueError, KeyError):
-        return None
-    from .modal import _touch
-
-    _touch(path)  # recently used: pruned last
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as e:  # matches its record
+        return None, f"{path.name} cannot be read ({type(e).__name__})"
+    _used(path)  # recently used: pruned last
     model = CachedPlate("plate", mats["M"], mats["K"], contacts, info, mats["T"], nodes, elements, None, volume, None)
     model.node_dofs = node_dofs
     model.full_displacement = model.full
     model.element_energies = model.energies
     model.args = args
-    return model
+    return model, None
 
 
 class CachedPlate(SolidModel):
