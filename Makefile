@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test test-slow test-all test-py test-pythons docs install bench clean
+.PHONY: demo test test-slow test-all test-blas test-py test-pythons docs install bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,20 @@ test-slow: install
 
 test-all: install
 	$(BIN)/python -m pytest -q
+
+# the numerics-heavy tests under other OpenBLAS kernels than the machine's own, so that a bound
+# tuned to one CPU's arithmetic fails here first (the kernel each run uses is printed)
+BLAS_CORES ?= Sandybridge Prescott
+BLAS_TESTS ?= tests/test_exact.py tests/test_solids.py tests/test_symmetry.py tests/test_mode_scaling.py \
+	tests/test_propagation.py tests/test_conservation.py tests/test_core.py tests/test_narrowband_physics.py \
+	tests/test_narrowband.py tests/test_validation.py tests/test_hertz_impact.py tests/test_nesterenko.py \
+	tests/test_coupled.py
+test-blas: install
+	@echo "the machine's own kernel:"; $(BIN)/python tests/tools/blas_core.py || true
+	@for core in $(BLAS_CORES); do \
+	  echo "OPENBLAS_CORETYPE=$$core:"; OPENBLAS_CORETYPE=$$core $(BIN)/python tests/tools/blas_core.py || true; \
+	  OPENBLAS_CORETYPE=$$core $(BIN)/python -m pytest -q -m "not slow" -p no:cacheprovider $(BLAS_TESTS) || exit 1; \
+	done
 
 # the quick subset on another interpreter present on this machine (make test-py PY=python3.13);
 # MARK= (empty) runs the whole suite there

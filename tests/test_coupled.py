@@ -9,6 +9,8 @@ from granel.coupling.solver import SolverError
 from granel.run import run_problem, run_scenario
 from granel.solid.beam import build_beam
 
+from test_exact import ledger_bound
+
 CASES = [(solid, exc, shock) for solid in ("plate", "beam") for exc in ("LSGM:3", "SSGM:C") for shock in ("weak", "moderate", "strong")]
 
 
@@ -33,8 +35,9 @@ def test_energy_balance_all_twelve_cases(twelve, case):
     w = ds["input_work"].values
     assert ds["time"].values[-1] == pytest.approx(8e-4)
     assert np.abs(ds["balance_error"].values).max() < 1e-3 * w.max()  # issue: 0.1 % at every output
-    assert np.abs(ds["balance_error"].values).max() < 1e-5 * w.max()  # measured: <= 3.1e-6 (walled)
-    # energy reached the solid and crossed it
+    # the error-controlled steps' own bound (ledger_tol 8e-7 of the input)
+    assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, paper(*case))
+    # energy reached the solid and crossed it (thresholds of physics: 0.1 % and 0.01 % of the input)
     assert ds["energy_solid"].values.max() > 1e-3 * w.max()
     far = "energy_ssgm" if case[1] == "LSGM:3" else "energy_lsgm"
     assert ds[far].values.max() > 1e-4 * w.max()
@@ -66,7 +69,9 @@ def test_step_convergence_strong(twelve, solid, exc):
 
 
 def test_rigid_limit():
-    """A plate 10^4 times stiffer gives the rigid solid's granule velocities (same contact law)."""
+    """A plate 10^4 times stiffer gives the rigid solid's granule velocities (same contact law):
+    physics, not numerics; the stiff plate's static compliance at a contact is 1e-4 of the
+    paper plate's, the velocities are asked within 1 %."""
     extra = ['simulation.duration="0.2ms"', "materials.stiff.E=2e15", "materials.stiff.rho=7850.0", "materials.stiff.nu=0.3"]
     for exc in ("LSGM:3", "SSGM:C"):
         stiff = run_scenario(paper("plate", exc, "strong", *extra, 'solid.material="stiff"'))
@@ -95,29 +100,38 @@ def test_symmetric_shock_leaves_antisymmetric_beam_modes_unexcited(twelve):
 
 
 def test_paper_and_fast_solvers_agree_beam():
-    """The beam at constant dt0: the two solvers solve the same discrete equations."""
+    """The beam at constant dt0: the two solvers solve the same discrete equations, so their
+    energies differ by no more than the interface iterations stop short of them, (A4)'s reltol
+    = 1e-6 of each force (measured 4e-11: the fixed point converges well past it). Neither
+    controls the balance (13): it is RK4's truncation at the wall impacts, falling at its order
+    with the step (measured 1.45e-6 and 3.5e-7 of the input at 40 and 20 ns: order 2.0, the Hertz
+    onsets')."""
     a = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="paper"', 'simulation.duration="0.3ms"'))
     b = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="fast"', 'simulation.integrator="newmark"',
                            'simulation.duration="0.3ms"'))
     assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-6
     assert a.attrs["solver_min_step"] == 4e-8
-    w = a["input_work"].values.max()
-    # measured 1.45e-6 of the input with the outer walls (RK4 at the SSGM's wall impacts; 5e-7 free-edge)
-    assert np.abs(a["balance_error"].values).max() < 2e-6 * w
+    half = run_scenario(paper("beam", "SSGM:C", "strong", 'simulation.solver="paper"', 'simulation.duration="0.3ms"',
+                              'simulation.dt="20ns"'))
+    balance = [np.abs(d["balance_error"].values).max() / d["input_work"].values.max() for d in (a, half)]
+    assert balance[0] / balance[1] > 2**1.5
 
 
 def test_paper_solver_halves_the_step_on_the_plate():
     """Strong shock on the SSGM: when the wave reaches the plate, (A9) exceeds 1/2 at dt0 and the
-    step is halved (paper Fig. 11); both solvers agree on the energies to 0.5 % of the input."""
+    step is halved (paper Fig. 11); both solvers agree on the energies to 1e-3 of the input (the
+    fast method's accuracy target; measured 6e-7). The paper's steps are not ledger-controlled:
+    their balance is RK4's truncation at steps down to 1.25 ns (measured 1.2e-9 of the input),
+    asserted below the fast method's bound."""
     extra = ['simulation.duration="0.03ms"']
     a = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.solver="paper"', *extra))
     b = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.solver="fast"', *extra))
     assert a.attrs["solver_min_step"] < 4e-8 / 4
-    assert a["step_lambda"].values.max() <= 0.5 + 1e-12
+    assert a["step_lambda"].values.max() <= 0.5  # (B1)'s test, in float32, which holds 0.5 exactly
     assert b["step_lambda"].values.max() > 0.5  # the fast solver does not need the limit
     w = a["input_work"].values.max()
-    assert np.abs(a["balance_error"].values).max() < 1e-6 * w
-    assert np.abs(norm_energies(a) - norm_energies(b)).max() < 5e-3
+    assert np.abs(a["balance_error"].values).max() < 8e-7 * w
+    assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-3
 
 
 def test_non_convergence_stops_with_a_diagnosis():
@@ -150,13 +164,22 @@ def test_coupled_resume(tmp_path, solver):
 
 
 def test_sparse_newton_path_matches_the_modal_path():
-    """Solids too large for all modes use sparse Newmark with the same Newton coupling."""
+    """Solids too large for all modes use sparse Newmark with the same Newton coupling: the same
+    discrete equations as modal Newmark, so the two differ by round-off: each step's solve with
+    K + 4 M / dt^2 (or its modes) is good to eps times its condition in the energy norm,
+    1 + (w_max dt / 2)^2 (9 here), over 1000 steps (measured 2.3e-13 of the input against 2e-12;
+    2.7e-13 with Prescott's kernels)."""
+    from granel.solid.modal import all_modes
+
     sc = paper("plate", "SSGM:C", "strong", 'simulation.duration="0.04ms"', 'simulation.integrator="newmark"')
-    a = run_problem(S.build_problem(sc), sparse=True)
+    problem = S.build_problem(sc)
+    a = run_problem(problem, sparse=True)
     b = run_scenario(sc)
     assert a.attrs["solver_name"] == "fast-sparse" and b.attrs["solver_name"] == "fast"
     assert a.attrs["solver_min_step"] == 4e-8  # no (A9) halving
-    assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-8
+    w_max, dt, steps = all_modes(problem.solid).omega[-1], 4e-8, a.sizes["step"]
+    tol = steps * np.finfo(float).eps * (1 + (w_max * dt / 2) ** 2)
+    assert np.abs(norm_energies(a) - norm_energies(b)).max() < tol
 
 
 @pytest.mark.slow
@@ -168,5 +191,5 @@ def test_paper_method_on_the_strong_ssgm_plate_case():
     b = run_scenario(paper("plate", "SSGM:C", "strong", 'simulation.integrator="newmark"'))
     w = a["input_work"].values.max()
     assert np.abs(a["balance_error"].values).max() < 1e-6 * w
-    assert a["step_lambda"].values.max() <= 0.5 + 1e-6 and a.attrs["solver_min_step"] < 4e-8 / 2**7
+    assert a["step_lambda"].values.max() <= 0.5 and a.attrs["solver_min_step"] < 4e-8 / 2**7  # float32 holds 0.5
     assert np.abs(norm_energies(a) - norm_energies(b)).max() < 1e-3

@@ -16,7 +16,10 @@ from granel import scenario as S
 from granel.analysis.narrowband import harmonic_amplitudes, response_period, steady_window, transmissibility
 from granel.run import run_scenario
 
+from test_exact import ledger_bound
+
 E, RHO, NU = 200e9, 7850.0, 0.3  # granel's default steel
+EPS = np.finfo(float).eps
 
 
 def sphere_mass(R):
@@ -146,13 +149,21 @@ def test_band_edges_of_a_diatomic_chain(tmp_path):
     Asserted: passes in the acoustic band (> 0 dB at 0.8 f_a, > -10 dB at 0.95 f_a), at least
     30 dB lost across f_a +- 5 %, the gap's middle and 1.05 f_top at least 40 dB below every
     passband point, and the optical band within 1 dB of the linearised chain and above -30 dB.
+    These are physics margins (dB of a lattice's response, the same on any machine: no BLAS in
+    a chain on a rigid solid), not round-off.
 
     At the default ledger bound the steps must not stall here (they did, before the ledger's
     round-off floor and the controller's drift term were fixed: 13.2 M steps of 0.24 ns for these
     4 ms): at most 20,000 steps a run is asserted."""
     F0, drive, alpha = 10.0, 0.1, 0.02
     fa, fo, ftop = diatomic_bands(F0)
-    assert (fa, fo, ftop) == pytest.approx((11.684e3, 25.139e3, 27.722e3), rel=1e-3)
+    # the figures as printed: half a unit of their fifth digit is 4.3e-5 of 11.684
+    assert (fa, fo, ftop) == pytest.approx((11.684e3, 25.139e3, 27.722e3), rel=5e-5)
+    # the static start: the equilibrium holds each bead to 1e-10 of the load, the wall's force
+    # to 20 times that along the chain; the smallest overlap is a difference of positions of 0.15 m
+    # (measured 3.0e-10 against 2.0e-9)
+    overlap = min((F0 / hertz_A(R_HEAVY, R_LIGHT)) ** (2 / 3), (F0 / hertz_A(R_LIGHT)) ** (2 / 3))
+    static_tol = 20 * 1e-10 + 1.5 * np.spacing(0.2) / overlap
     radii = [R_HEAVY if k % 2 == 0 else R_LIGHT for k in range(20)]
     points = {"0.8 f_a": 0.8 * fa, "0.95 f_a": 0.95 * fa, "1.05 f_a": 1.05 * fa, "mid gap": 0.5 * (fa + fo),
               "mid optical": 0.5 * (fo + ftop), "1.05 f_top": 1.05 * ftop}
@@ -162,7 +173,7 @@ def test_band_edges_of_a_diatomic_chain(tmp_path):
         ds = run_scenario(sc)
         assert ds.attrs["solver_steps"] < 20_000, name
         t, F = ds["time"].values, ds["wall_force_normal"].values[:, 0]
-        assert F[0] == pytest.approx(F0, rel=1e-9)  # started from the static state
+        assert F[0] == pytest.approx(F0, rel=static_tol)  # started from the static state
         amp = harmonic_amplitudes(t, F, f, orders=(1,), subharmonics=(), window=(2e-3, 4e-3))["f"]
         db[name] = 20 * math.log10(transmissibility(amp, drive))
     print({k: round(v, 2) for k, v in db.items()})
@@ -172,7 +183,7 @@ def test_band_edges_of_a_diatomic_chain(tmp_path):
     assert db["mid gap"] < passband - 40.0
     assert db["1.05 f_top"] < passband - 40.0
     lin = 20 * math.log10(linear_transmission(radii, F0, alpha, points["mid optical"]))
-    assert lin == pytest.approx(-24.9, abs=0.1)
+    assert lin == pytest.approx(-24.9, abs=0.05)  # the linear chain's figure as printed, to half its last digit
     assert db["mid optical"] == pytest.approx(lin, abs=1.0)
     assert db["mid optical"] > -30.0
 
@@ -186,13 +197,14 @@ def test_energy_balance_over_10_ms(tmp_path):
     within 1 %) from 2.7 ms on, over 11.3 ms.
 
     Measured: max |balance_error| (eq. 13) / max |input_work| = 2.2e-7 over the whole run
-    (asserted < 1e-5). Independently of the solver's ledger, over the whole periods from 4 ms to
+    (asserted within the error-controlled steps' bound; 0.15 of it). Independently of the solver's ledger, over the whole periods from 4 ms to
     the end (10 ms), by trapezoids on the outputs: the loads' work, integral of (F0 + F(t)) v_1
     dt, equals the change of the granules' energy (energy_c) plus the energy dissipated
     (dissipated_viscous) to 1e-6 of it (asserted 1e-4) and the run's own input_work to 1e-6 (asserted 1e-4); the
     drive's work alone equals the dissipation to 8e-6 (asserted 1e-4: power in = power out in a
     steady state; the rest is a slow drift of the chain's mean compression, 2e-10 J, whose
-    energy the preload exchanges)."""
+    energy the preload exchanges). The 1e-4 is the accuracy asked of a run's energies against
+    its own outputs; these are a chain's scalar arithmetic, the same on every machine."""
     from scipy.integrate import trapezoid
 
     F0, drive, alpha, R, out = 10.0, 0.1, 0.05, 0.005, 2e-6
@@ -209,7 +221,7 @@ def test_energy_balance_over_10_ms(tmp_path):
     print(f"max|balance_error| / max|input_work| = {ratio:.2e} (max|W| = {np.abs(W).max():.3e} J); "
           f"steady from {lo * 1e3:.2f} ms")
     assert np.abs(W).max() > 1e-7  # the drive did work
-    assert ratio < 1e-5
+    assert np.abs(B).max() <= ledger_bound(ds, sc)
     assert lo < 4e-3 and hi - lo >= 10e-3
     # whole periods from 4 ms to the end, on outputs
     k1 = len(t) - 1
@@ -245,7 +257,9 @@ def test_a_barely_compressed_chain_locks_to_one_or_two_drive_periods(tmp_path):
     period. At 2 kHz it locks to two drive periods (m = 2, period doubling): steady over pairs of
     periods from 12 ms, mismatch(1) = 1.1 but mismatch(2) = 1.2e-4; the wall force has 0.568 N
     at f/2 (1.065 N at f), and the contacts 3-4, 4-5, 5-6 and 6-wall open once every two periods
-    (1-2 and 2-3 stay shut). The energy balance (13) holds to 1e-5 of the work in both.
+    (1-2 and 2-3 stay shut). The energy balance (13) holds within the error-controlled steps'
+    bound in both. The other margins are physics (mismatches, shares of harmonics, a steady
+    window of 1 %), far from round-off.
 
     Also seen (not asserted): m = 2 from 1.25 to 2 kHz, m = 1 from 2.5 to 6 kHz (at 3 kHz with a
     1e-3 residue of period 2), no lock at 1 kHz; starting from touching beads under a sudden push
@@ -261,7 +275,7 @@ def test_a_barely_compressed_chain_locks_to_one_or_two_drive_periods(tmp_path):
         F = ds["wall_force_normal"].values[:, 0] - static  # its dynamic part
         B, W = ds["balance_error"].values, ds["input_work"].values
         print(f"f = {f:.0f} Hz: max|balance_error| / max|input_work| = {np.abs(B).max() / np.abs(W).max():.1e}")
-        assert np.abs(B).max() < 1e-5 * np.abs(W).max()
+        assert np.abs(B).max() <= ledger_bound(ds, sc)
         # steady over whole responses of m periods (a period-doubled one changes every period)
         win = steady_window(t, F, m_expected * T, rtol=1e-2)
         assert win is not None and win[0] < 15e-3
