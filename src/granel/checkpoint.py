@@ -11,7 +11,8 @@ import numpy as np
 
 
 def fingerprint(text: str) -> str:
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    """The checkpoint's key of a scenario text (file names that are not UTF-8 kept as bytes)."""
+    return hashlib.sha256(text.encode(errors="surrogateescape")).hexdigest()[:16]
 
 
 def save_checkpoint(path: str | Path, fp: str, arrays: dict, recorded: dict, times: list) -> Path:

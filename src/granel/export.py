@@ -223,6 +223,27 @@ def count_steps(ds, model, formats) -> int:
     return sum(per[f] for f in formats)
 
 
+# bytes an exported value takes at most, over the formats (the CSV and XYZ text of a float64:
+# repr's 17-24 characters and a separator)
+BYTES_PER_VALUE = 26
+
+
+def export_size(ds, model, formats) -> float:
+    """An upper estimate of an export's bytes: every granule value (position, displacement,
+    velocity, spin, energy, radius: 13 numbers) at every output, and the solid's nodal (6) and
+    element (5) values at every stored solid output, in each format chosen, plus 64 KiB a file
+    of headers. `guard.resources.check_disk` holds it against the free disk before anything is
+    written, so that no writer (HDF5's above all) meets a full disk."""
+    nt, n = ds.sizes["time"], ds.sizes["granule"]
+    per_frame = 13 * n
+    solid = 0
+    if has_solid(ds, model):
+        solid = ds.sizes["solid_time"] * (6 * len(solid_points(model)) + 5 * model.nelements)
+    values = nt * per_frame + solid
+    files = count_steps(ds, model, formats) + 8
+    return float(len(formats) * values * BYTES_PER_VALUE + files * 65536)
+
+
 # --------------------------------------------------------------------------------------------
 # writers (into the staging folder)
 
@@ -382,6 +403,9 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sc, system, model = model_of(ds)
+    from .guard.resources import check_disk
+
+    check_disk(export_size(ds, model, formats), out, f"the export to {out}")
     elastic = elastic_constants(sc) if has_solid(ds, model) else (0.0, 0.0)
     stage = staging_folder(out)
     written = []

@@ -297,12 +297,15 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
     for _, driven, _ in sp.runs():
         try:
             sc = S.load(_base_path(spec, base_dir), ov + sp.overrides(f, driven))
-            build_granular(sc, sc.base)
+            system = build_granular(sc, sc.base)[0]
         except S.ScenarioError as e:
             if "excitations.0.granule" in str(e) and "no such granule" in str(e):
                 which = "drive" if driven == sp.drive else "measure"
                 raise S.ScenarioError(f"spectrum.{which} = {driven!r}: no such granule in {spec.base}") from None
             raise
+        if sp.measure not in system.labels:  # measured in every direction, driven only in both
+            raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: no such granule in {spec.base} (e.g. "
+                                  f"{system.labels[-1]!r})")
 
 
 def case_fingerprint(spec: CaseSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:

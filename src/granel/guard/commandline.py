@@ -27,7 +27,7 @@ except ImportError:  # pragma: no cover - older typer uses click itself
 
 Exit, Abort = typer.Exit, typer.Abort
 
-from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, GranelError, Terminated, exit_code, is_no_space
+from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, GranelError, Terminated, exit_code, is_no_space, is_numerical
 from .signals import stops_as_exceptions
 
 console = Console(stderr=True, soft_wrap=True)
@@ -77,7 +77,7 @@ def crash_report(e: BaseException) -> str:
     """Write the traceback of an internal error to a file; its path (or '' if none could be written)."""
     try:
         fd, path = tempfile.mkstemp(prefix=f"granel-crash-{time.strftime('%Y%m%d-%H%M%S')}-", suffix=".txt")
-        with os.fdopen(fd, "w") as fh:
+        with os.fdopen(fd, "w", errors="backslashreplace") as fh:
             fh.write(" ".join(sys.argv) + "\n\n")
             traceback.print_exception(type(e), e, e.__traceback__, file=fh)
         return path
@@ -98,6 +98,10 @@ def exit_for(e: BaseException) -> int:
         path = crash_report(e)
         error(f"internal error (a bug in granel, please report it): {type(e).__name__}: {one_line(str(e))[:300]}"
               + (f"; the traceback is in {path}" if path else ""))
+    elif is_numerical(e):
+        path = crash_report(e)
+        error(f"a numerical failure ({type(e).__name__}: {one_line(str(e))[:200]}): the scenario's values are probably "
+              "beyond what the models hold in double precision" + (f"; the traceback is in {path}" if path else ""))
     elif isinstance(e, MemoryError):
         error("out of memory: the request needs more memory than this machine could give (lower the outputs' size or "
               "the number of granules or modes)")

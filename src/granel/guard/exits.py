@@ -65,6 +65,16 @@ def is_no_space(e: BaseException) -> bool:
     return "no space left" in text or "disk quota exceeded" in text
 
 
+# failures of the numerics on values beyond what float64 models hold (a solid 1e-300 m wide, a
+# density of 1e300): a numerical stop (exit 3), reported with the traceback's file, not a bug's
+NUMERICAL = ("LinAlgError", "ArpackError", "ArpackNoConvergence", "ZeroDivisionError", "OverflowError",
+             "FloatingPointError")
+
+
+def is_numerical(e: BaseException) -> bool:
+    return any(k.__name__ in NUMERICAL for k in type(e).__mro__)
+
+
 def exit_code(e: BaseException) -> int:
     """The exit code of any exception: its own `code`, else by kind."""
     if isinstance(e, KeyboardInterrupt):
@@ -76,6 +86,6 @@ def exit_code(e: BaseException) -> int:
         return code
     if isinstance(e, OSError) or is_no_space(e):
         return FILES
-    if isinstance(e, MemoryError):
+    if isinstance(e, MemoryError) or is_numerical(e):
         return STOPPED
     return INTERNAL

@@ -211,6 +211,8 @@ class OutputPlan:
                 stamp_folder(f.path, f.kind)
             for f in self.files:
                 _real(f.path).parent.mkdir(parents=True, exist_ok=True)
+        except GranelError:
+            raise  # already names its file (a full disk while stamping a folder, ...)
         except OSError as e:
             from .exits import is_no_space
 

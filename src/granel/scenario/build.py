@@ -370,7 +370,10 @@ def build_problem(sc: Scenario) -> Problem:
     built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
     system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
     state = type(state)(state.y.copy(), state.t)
-    solid = build_solid(sc, system)
+    try:
+        solid = build_solid(sc, system)
+    except ValueError as e:  # a contact on a clamped node, layers that overlap, ...
+        raise ScenarioError(f"solid: {e}") from None
     force0, report, table = None, None, None
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)

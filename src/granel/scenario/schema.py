@@ -108,6 +108,13 @@ class SimulationSpec(_Strict):
             raise ValueError(f"must be a positive time, got {v!r}")
         return v
 
+    @model_validator(mode="after")
+    def _step_within_run(self):
+        if "max_step" in self.model_fields_set and self.max_step > self.duration:
+            raise ValueError(f"@max_step@{self.max_step!r}@the largest step must not exceed simulation.duration "
+                             f"({self.duration:.3e} s)")
+        return self
+
     @field_validator("checkpoint_every", "solid_output_every")
     @classmethod
     def _zero_or_positive(cls, v):
@@ -122,9 +129,15 @@ class ContactSpec(_Strict):
     k_s: float = Field(100.0, gt=0, description="tanh smoothness of the friction law, eq. (5) [s/m]")
 
 
+# the physical ranges granel's models hold in double precision (masses, stiffnesses and eigenvalues
+# spanning more than these lose their digits): lengths from 0.1 um to 10 km, moduli up to 1e20 Pa,
+# densities from 1e-3 (a rarefied gas) to 1e6 kg/m^3 (fifty times osmium's)
+LENGTH_MIN, LENGTH_MAX = 1e-7, 1e4
+
+
 class MaterialSpec(_Strict):
-    E: float = Field(gt=0, description="Young's modulus [Pa]")
-    rho: float = Field(gt=0, description="density [kg/m^3]")
+    E: float = Field(gt=0, le=1e20, description="Young's modulus [Pa]")
+    rho: float = Field(ge=1e-3, le=1e6, description="density [kg/m^3]")
     nu: float = Field(gt=-1, lt=0.5, description="Poisson's ratio")
 
     def material(self) -> Material:
@@ -146,9 +159,9 @@ class SolidSpec(_Strict):
     material: str = "steel"
     x0: float = 0.0
     y0: float = 0.0
-    width: float = Field(0.01, gt=0)
-    length: float = Field(0.1, gt=0)
-    thickness: float = Field(0.001, gt=0)
+    width: float = Field(0.01, ge=LENGTH_MIN, le=LENGTH_MAX)
+    length: float = Field(0.1, ge=LENGTH_MIN, le=LENGTH_MAX)
+    thickness: float = Field(0.001, ge=LENGTH_MIN, le=LENGTH_MAX)
     beam_elements: int = Field(40, ge=2)
     mesh: PlateMeshSpec = PlateMeshSpec()
     clamped: tuple[bool, bool] = (True, True)
@@ -157,7 +170,7 @@ class SolidSpec(_Strict):
 class MediumSpec(_Strict):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")
     side: Literal["left", "right", "none"] = "left"
-    radius: float | None = Field(None, gt=0)
+    radius: float | None = Field(None, ge=LENGTH_MIN, le=LENGTH_MAX)
     material: str = "steel"
     columns: list[Annotated[int, Field(ge=1)]] | None = None
     center_y: float | None = Field(None, description="y of column 0's centre (default: the solid's mid-length, or 0)")
@@ -178,7 +191,7 @@ class MediumSpec(_Strict):
                           "walls (bottom/top for left/right growth, left/right for up/down), outer, face")
     gap: float = Field(0.0, ge=0)
     granules_file: str | None = None
-    radii: list[Annotated[float, Field(gt=0)]] | None = Field(
+    radii: list[Annotated[float, Field(ge=LENGTH_MIN, le=LENGTH_MAX)]] | None = Field(
         None, description="a straight chain of touching beads instead of a hexagonal packing: their radii [m], "
                           "from the face outward (label 1 is the outermost)")
     materials: list[str] | None = Field(None, description="a chain's bead materials, from the face outward "
