@@ -172,10 +172,24 @@ def test_a_full_disk_is_skipped_with_a_note_and_leaves_no_temporaries(cache, mon
     assert list(cache.iterdir()) == []
 
 
-def test_a_read_only_cache_is_skipped_with_a_note():
+def _runs_as_nobody() -> bool:
+    """Whether this interpreter starts as the user nobody (it may not: a Python installed under
+    root's home, or its shared library there, is out of nobody's reach)."""
+    import shutil
+
+    if shutil.which("setpriv") is None:
+        return False
+    probe = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c",
+                            "import granel"], capture_output=True, text=True, timeout=120)
+    return probe.returncode == 0
+
+
+def test_a_read_only_cache_is_skipped_with_a_note(monkeypatch):
     """A real read-only folder: a process that cannot write it (a folder it does not own, with
-    no write permission; root writes anywhere, so then the process runs as nobody, through
-    setpriv, when the machine has it)."""
+    no write permission). Root writes anywhere, so then the process runs as nobody through
+    setpriv; where nobody cannot start this Python, the same refusal is made in this process: every
+    creation under the folder fails with EACCES, as the kernel answers a reader without write
+    permission."""
     import shutil
     import tempfile
 
@@ -187,9 +201,10 @@ def test_a_read_only_cache_is_skipped_with_a_note():
     env = {**os.environ, "GRANEL_CACHE": str(folder), "PYTHONDONTWRITEBYTECODE": "1"}
     command = [sys.executable, "-c", code]
     try:
+        if os.geteuid() == 0 and not _runs_as_nobody():
+            _read_only_in_process(folder, monkeypatch)
+            return
         if os.geteuid() == 0:
-            if shutil.which("setpriv") is None:
-                pytest.skip("root writes anywhere, and setpriv is missing")
             folder.chmod(0o755)  # root's: nobody may read it, not write it
             command = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", *command]
             env["HOME"] = str(folder)
@@ -203,6 +218,36 @@ def test_a_read_only_cache_is_skipped_with_a_note():
     finally:
         folder.chmod(0o755)
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def _read_only_in_process(folder: Path, monkeypatch) -> None:
+    """The read-only case in this process: os.open and os.mkdir under `folder` fail with EACCES."""
+    real_open, real_mkdir = os.open, os.mkdir
+    inside = str(folder.resolve()) + os.sep
+
+    def denied(path) -> bool:
+        return os.path.abspath(os.fspath(path)).startswith(inside)
+
+    def fake_open(path, flags, *args, **kwargs):
+        if denied(path) and flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT):
+            raise PermissionError(errno.EACCES, "Permission denied", os.fspath(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    def fake_mkdir(path, *args, **kwargs):
+        if denied(path):
+            raise PermissionError(errno.EACCES, "Permission denied", os.fspath(path))
+        return real_mkdir(path, *args, **kwargs)
+
+    monkeypatch.setenv("GRANEL_CACHE", str(folder))
+    monkeypatch.setattr(os, "open", fake_open)
+    monkeypatch.setattr(os, "mkdir", fake_mkdir)
+    monkeypatch.setattr(modal, "_NOTED", set())
+    with pytest.warns(modal.CacheNote, match="cannot be written.*computing without the cache"):
+        plate = build_plate(*small_plate())
+        origin = modal.all_modes(plate).origin
+    monkeypatch.undo()
+    assert origin == "computed"
+    assert list(folder.iterdir()) == []
 
 
 def test_granel_run_with_the_cache_path_a_file_completes(tmp_path):
