@@ -16,7 +16,8 @@ from rich.table import Table
 
 from . import __version__
 from . import scenario as S
-from .guard.commandline import GuardedGroup, error
+from .guard.commandline import GuardedGroup
+from .guard.exits import GranelError
 from .guard.owners import is_granel_file
 
 app = typer.Typer(cls=GuardedGroup, add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -37,15 +38,25 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 
 
 def _fail(msg: str, code: int = 2):
-    error(msg)
-    raise typer.Exit(code)
+    """End the command with `msg` as its one error line and exit `code`. The line is printed by
+    the group (`guard.commandline`) once the command's progress bars and spinners have closed, so
+    that it is the last line on standard error."""
+    raise GranelError(msg, code) from None
+
+
+MAX_WORKERS = 1024  # local worker processes a command may start
+
+
+def _check_workers(workers: int) -> None:
+    if not 1 <= workers <= MAX_WORKERS:
+        _fail(f"--workers {workers}: give a whole number of worker processes from 1 to {MAX_WORKERS}")
 
 
 def _overrides(solid=None, excite=None, duration=None, dt=None, solver=None, sets=None) -> list[str]:
     """The CLI shortcuts as `key=value` scenario overrides (string values quoted for TOML)."""
     quoted = {"solid.kind": solid, "excitations.0.granule": excite, "simulation.duration": duration, "simulation.dt": dt,
               "simulation.solver": solver}
-    return [f'{key}="{val}"' for key, val in quoted.items() if val] + list(sets or [])
+    return [f'{key}="{val}"' for key, val in quoted.items() if val is not None] + list(sets or [])
 
 
 def _shock_level(shock: str | None):
@@ -84,6 +95,11 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
     from .scenario.usage import check_overrides_used
 
     raw, base = S.load_raw(name)
+    if shock is not None:
+        both = [o.split("=", 1)[0].strip() for o in overrides
+                if o.split("=", 1)[0].strip() in ("excitations.0.shock", "excitations.0.fmax")]
+        if both:
+            raise S.ScenarioError(f"--shock and --set {both[0]} both set the first excitation's peak force: give one")
     raw = S.apply_overrides(raw, [*overrides, *implied])
     if shock is not None:
         if not raw.get("excitations"):
@@ -168,6 +184,10 @@ def _check_run_paths(output: Path, sc, scenario: str, resume: Path | None, check
 
     source = None if resume is None else (resume if resume.suffix == ".ckpt" or not resume.name
                                           else resume.with_suffix(".ckpt"))
+    if source is not None:
+        from .guard.outputs import check_name_lengths
+
+        check_name_lengths(source, "--resume")  # a name the file system refuses is a wrong name (exit 2)
     plan = OutputPlan(reserved={".ckpt": "the .ckpt suffix is kept for checkpoints; give the result a .nc name"})
     plan.add_inputs(S.scenario_file(scenario), *S.referenced_files(sc), source)
     plan.file(output, "-o")
@@ -218,7 +238,7 @@ def run(
     implied = []
     if dt and solver != "paper":
         implied.append("simulation.adaptive=false")  # --dt forces a fixed step
-    if checkpoint_every:
+    if checkpoint_every is not None:
         ov.append(f'simulation.checkpoint_every="{checkpoint_every}"')
     wall_limit = _wall_seconds(max_wall, "--max-wall")
     sc = _load_or_fail(scenario, ov, _shock_level(shock), implied)
@@ -327,6 +347,10 @@ def init(
     if not name.strip() or "/" in name or name.startswith("."):
         _fail(f"NAME {name!r}: give a plain name, e.g. mychain")
     out = output or Path(f"{name}.toml")
+    from .guard.outputs import check_folder_writable, check_name_lengths
+
+    check_name_lengths(out, "-o")  # the output rules' checks of a name and its folder (exit 2 or 4)
+    check_folder_writable(out.absolute().parent, "-o", out)
     if out.exists():
         _fail(f"{out}: exists; granel init never replaces a file (choose another NAME or -o)")
     try:
@@ -398,6 +422,7 @@ def paper(
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
+    _check_workers(workers)
     _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir() and any((p / "runs").glob("*.nc")))
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
@@ -426,7 +451,8 @@ def paper(
 @app.command()
 def reciprocity(
     scenario: str = typer.Argument("paper", help="built-in name or TOML file"),
-    shock: str = typer.Option("strong", help="weak | moderate | strong, or a peak force in N"),
+    shock: Optional[str] = typer.Option(None, help="weak | moderate | strong, or a peak force in N "
+                                        "(default: the scenario's own; the paper's is strong)"),
     solid: Optional[str] = typer.Option(None, help="plate | beam | rigid"),
     a: str = typer.Option("LSGM:3", "--a", help="first excitation/measurement granule"),
     b: str = typer.Option("SSGM:C", "--b", help="second excitation/measurement granule"),
@@ -541,7 +567,9 @@ def bench(
     times."""
     from .benchmark import run_bench
 
-    res = run_bench(quick=quick, only=cases.split(",") if cases else None, duration=duration, reference=reference,
+    only = _bench_cases(cases)
+    _bench_duration(duration)
+    res = run_bench(quick=quick, only=only, duration=duration, reference=reference,
                     fresh=fresh, log=lambda s: console.print(s))
     if json_out:
         print(json.dumps(res, indent=2))
@@ -558,6 +586,42 @@ def bench(
                   f"newmark {res['newmark_total_s']:.2f} s")
     if res.get("paper_study_s") is not None:
         console.print(f"granel paper (no animations): {res['paper_study_s']:.1f} s")
+
+
+def _bench_cases(cases: str | None) -> list[str] | None:
+    """`bench --cases`: paper case tags, checked before any benchmark runs."""
+    if cases is None:
+        return None
+    from .report import CASES, case_tag
+
+    tags = [case_tag(c) for c in CASES]
+    asked = [c.strip() for c in cases.split(",")]
+    unknown = [c for c in asked if c not in tags]
+    if unknown:
+        _fail(f"--cases {cases!r}: no case {unknown[0]!r}; choose from {', '.join(tags)}")
+    return asked
+
+
+def _bench_duration(duration: str | None) -> None:
+    """`bench --duration`: a positive simulated time the paper cases can run, checked before any
+    benchmark runs (the scenario's own checks: the step, the outputs, the memory)."""
+    if duration is None:
+        return
+    from .guard.exits import InputError
+    from .report import case_scenario
+    from .scenario.estimate import check_needs
+    from .units import parse_time
+
+    try:
+        t = parse_time(duration)
+    except ValueError:
+        t = float("nan")
+    if not (np.isfinite(t) and t > 0):
+        _fail(f"--duration {duration!r}: give a positive simulated time, e.g. 0.1ms")
+    try:
+        check_needs(case_scenario(("plate", "SSGM:C", "strong"), "paper", [f'simulation.duration="{duration}"']))
+    except InputError as e:
+        _fail(f"--duration {duration}: {e}")
 
 
 @contextmanager
@@ -602,8 +666,7 @@ def sweep(
 ):
     """Run a parameter sweep on dask.distributed; re-running skips finished cases.
     Exit code 3 if any case failed."""
-    if workers < 1:
-        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    _check_workers(workers)
     from .sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
 
     try:
@@ -677,8 +740,10 @@ def spectrum(
     from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
     from .sweep import SweepSpec, check_spectrum, run_spec
 
-    if workers < 1:
-        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    _check_workers(workers)
+    for name, value in (("--cycles", cycles), ("--window-cycles", window_cycles), ("--ramp-cycles", ramp_cycles)):
+        if not np.isfinite(value):
+            _fail(f"{name} {value}: give a finite number of periods")
     try:
         freqs = parse_frequencies(frequencies, linear)
     except ValueError as e:
@@ -688,8 +753,15 @@ def spectrum(
     except ValueError as e:
         _fail(f"--amplitudes {amplitudes}: {e}")
     source = Path(scenario)
-    if scenario not in S.builtin_names() and not source.exists():
-        _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
+    if scenario not in S.builtin_names():
+        from .guard.reading import InputFileError, check_file
+
+        try:
+            check_file(source, "scenario")
+        except InputFileError as e:
+            if str(e).endswith(": no such file"):  # neither a file nor a built-in name
+                _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
+            raise
     base = scenario if scenario in S.builtin_names() else str(source.resolve())
     try:
         spec = SweepSpec.model_validate({
@@ -706,7 +778,8 @@ def spectrum(
     try:
         check_spectrum(spec, Path("."))
     except S.ScenarioError as e:
-        _fail(str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure"))
+        msg = str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure")
+        _fail(msg if scenario in msg or "--drive" in msg or "--measure" in msg else f"{scenario}: {msg}")
     work = out.with_suffix(".cases")
     from .guard.outputs import OutputPlan
     from .sweep import sweep_inputs
@@ -746,8 +819,7 @@ def design(
     """Search a design's variables for its objectives with Optuna, each trial a case of the
     sweep engine on dask.distributed; re-running continues the study. Exit code 3 if no trial
     succeeded."""
-    if workers < 1:
-        _fail(f"--workers {workers}: give a whole number of worker processes >= 1")
+    _check_workers(workers)
     if trials is not None and trials < 1:
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
@@ -786,7 +858,7 @@ def design(
                                  check=False)
                 bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
                 res["files"] += write_study_report(spec, base_dir, res["study"], out)
-    except typer.Exit:
+    except (typer.Exit, GranelError):
         if fresh and out.is_dir() and [p.name for p in out.iterdir()] == [STAMP]:
             (out / STAMP).unlink()  # refused before anything was written (e.g. an unreachable scheduler): no folder left
             out.rmdir()

@@ -46,9 +46,8 @@ def write_netcdf(ds, path: str | Path) -> Path:
     memory, so dask (if this process has it) is told to write synchronously: xarray would
     otherwise hand the write to whatever dask client is current, even a broken one. Every file
     carries the `granel_version` attribute: granel's mark (`guard.owners.is_granel_file`)."""
-    if "granel_version" not in ds.attrs:
-        ds = ds.copy(deep=False)
-        ds.attrs["granel_version"] = __version__
+    ds = ds.copy(deep=False)
+    ds.attrs = storable_attrs({"granel_version": __version__, **ds.attrs})
     buffer = io.BytesIO()
     with _synchronous_dask():
         ds.to_netcdf(buffer, engine="h5netcdf", invalid_netcdf=False)
@@ -85,12 +84,32 @@ def read_netcdf_or(path: str | Path, error=ResultFileError, what: str = "result 
         check_file(path, what)
     except InputFileError as e:
         raise _with_code(error(str(e)), e.code) from None
+    import gc
+
+    previous = sys.unraisablehook
+    sys.unraisablehook = _quiet_h5_finalisers(previous)
     try:
-        return read_netcdf(path)
-    except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
-        lines = str(e).strip().splitlines()
-        raise _with_code(error(f"{path}: cannot be read as NetCDF ({type(e).__name__}"
-                               f"{': ' + lines[0][:200] if lines else ''})"), 4) from None
+        try:
+            return read_netcdf(path)
+        except Exception as e:  # noqa: BLE001 - OSError (h5py), ValueError, ...: the file is the problem
+            lines = str(e).strip().splitlines()
+            failure = f"{type(e).__name__}{': ' + lines[0][:200] if lines else ''}"
+        gc.collect()  # the half-opened file's finaliser runs now, silent
+    finally:
+        sys.unraisablehook = previous
+    raise _with_code(error(f"{path}: cannot be read as NetCDF ({failure})"), 4) from None
+
+
+def _quiet_h5_finalisers(previous):
+    """An unraisable hook that drops h5netcdf's and h5py's: a file h5netcdf failed to open is half
+    built, and its finaliser fails again when it is collected (Python prints that as an ignored
+    exception with a traceback). Every other goes to `previous`."""
+    def hook(unraisable):
+        source = getattr(unraisable.object, "__module__", "") or ""
+        if not source.startswith(("h5netcdf", "h5py")):
+            previous(unraisable)
+
+    return hook
 
 
 def _with_code(e: Exception, code: int) -> Exception:
@@ -229,8 +248,15 @@ def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
             names = [c for c, cdims in aux if c != name and set(cdims) <= set(dims)]
             if names:
                 v.attrs["coordinates"] = " ".join(names)
-        f.attrs.update(spec.attrs)
+        f.attrs.update(storable_attrs(spec.attrs))
     return _netcdf_to(path, buffer)
+
+
+def storable_attrs(attrs: dict) -> dict:
+    """The attributes with every string `guard.writing.storable`."""
+    from .guard.writing import storable
+
+    return {k: storable(v) if isinstance(v, str) else v for k, v in attrs.items()}
 
 
 def _netcdf_to(path, buffer: io.BytesIO) -> Path:

@@ -53,6 +53,16 @@ def replace_refusal(path: Path) -> str | None:
     return None
 
 
+def storable(text: str) -> str:
+    """`text` as a UTF-8 file can hold it: a file name that is not UTF-8, held by Python as lone
+    surrogates, keeps its undecodable bytes as backslash escapes (the text `\\xff`)."""
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def fsync_path(path: str | Path) -> None:
     """Flush a file's (or a folder's) data to the disk."""
     fd = os.open(path, os.O_RDONLY)

@@ -115,8 +115,17 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
 
 
 def to_toml(sc: Scenario) -> str:
-    data = sc.model_dump(mode="json", exclude_none=True)
-    return tomli_w.dumps(data)
+    """The scenario as TOML text, every string `storable` (a result stores this text)."""
+    from ..guard.writing import storable
+
+    def clean(node):
+        if isinstance(node, dict):
+            return {k: clean(v) for k, v in node.items()}
+        if isinstance(node, list):
+            return [clean(v) for v in node]
+        return storable(node) if isinstance(node, str) else node
+
+    return tomli_w.dumps(clean(sc.model_dump(mode="json", exclude_none=True)))
 
 
 
@@ -138,8 +147,9 @@ def input_texts(sc: Scenario) -> dict[str, str]:
     """The text of every file the scenario refers to, by the names it gives them: a result
     stores them so that it carries its whole model (`with_input_texts` rebuilds it anywhere)."""
     from ..guard.reading import read_text
+    from ..guard.writing import storable
 
-    return {name: read_text(path, "file") for name, path in _referenced(sc).items()}
+    return {storable(name): read_text(path, "file") for name, path in _referenced(sc).items()}
 
 
 def with_input_texts(raw: dict, texts: dict[str, str], folder: Path) -> dict:
