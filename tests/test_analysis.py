@@ -173,6 +173,7 @@ def _png_ok(path, min_bytes=20_000):
     return path.stat().st_size > min_bytes and min(im.size) > 300
 
 
+@pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_paper_study_writes_every_figure(short_study):
     out, res = short_study
     figs = out / "figures"
@@ -194,6 +195,7 @@ def test_paper_study_writes_every_figure(short_study):
     assert "outer_wall = true" in read_netcdf(out / "runs" / "plate-LSGM3-strong.nc").attrs["scenario"]
 
 
+@pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_report_numbers_come_from_the_data(short_study):
     from granel.analysis import peak_time
     from granel.results import read_netcdf
@@ -211,6 +213,7 @@ def test_report_numbers_come_from_the_data(short_study):
     assert f"{f11['step_lambda'].values.max():.3f}" in row["granel"]
 
 
+@pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_animations_have_the_frames(short_study):
     import imageio.v3 as iio
 
@@ -240,6 +243,7 @@ def _captured(runs, make):
     return captured
 
 
+@pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_figure_curve_counts(short_study):
     from granel import figures as F
     from granel.report import CASES, case_tag

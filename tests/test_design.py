@@ -119,6 +119,7 @@ def _params(ds):
     return list(ds["var_media.0.radius"].values[ok])
 
 
+@pytest.mark.slow  # two design studies on a cluster (about 13 s)
 def test_a_killed_study_resumes_to_the_same_trials(tmp_path):
     """With one worker and a seed, a study stopped after 4 trials with a fifth in flight (asked,
     never told: the state a kill leaves) ends, when rerun, with the same finished trials as an

@@ -14,7 +14,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 @pytest.mark.parametrize("script, expect", [
     ("shock_on_the_paper_interface.py", "wrote shock_energies.png"),
     ("precompressed_chain_cutoff.py", "1.1 f_c: the far wall feels"),
-    ("shaker_and_export.py", "repeats every 2 drive period(s)"),
+    pytest.param("shaker_and_export.py", "repeats every 2 drive period(s)", marks=pytest.mark.slow),  # about 11 s
 ])
 def test_example_runs(tmp_path, script, expect):
     env = {**os.environ, "GRANEL_EXAMPLE_QUICK": "1", "MPLBACKEND": "Agg"}
@@ -27,6 +27,7 @@ def test_example_runs(tmp_path, script, expect):
         assert (tmp_path / "shaker-export" / "granules.extxyz").exists()
 
 
+@pytest.mark.slow  # the notebook under nbmake (about 8 s)
 def test_notebook_runs(tmp_path):
     """examples/nonreciprocal_transmission.ipynb runs top to bottom under nbmake (its own pytest, in a
     subprocess: `make test` does not pass --nbmake), shortened, on this interpreter's python3 kernel

@@ -1452,7 +1452,7 @@ def _cache_names(pristine_cache):
     return sorted(p.name for p in pristine_cache[0].iterdir() if p.is_file() and not p.name.endswith(".lock"))
 
 
-@settings(max_examples=int(os.environ.get("HOSTILE_CACHE", 8)), **HYPOTHESIS)
+@settings(max_examples=int(os.environ.get("HOSTILE_CACHE", 5)), **HYPOTHESIS)
 @given(pick=st.integers(0, 1000), kind=st.sampled_from(CACHE_DAMAGE), where=st.floats(0.0, 1.0),
        data=st.binary(max_size=8), scaled=st.booleans())
 def test_damaged_cache_entries(assets, pristine_cache, tmp_path_factory, pick, kind, where, data, scaled):

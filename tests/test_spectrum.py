@@ -90,6 +90,7 @@ def test_missing_scenario_and_unwritable_output(tmp_path):
     assert code == 2 and "is a folder" in out
 
 
+@pytest.mark.slow  # a two-direction spectrum on a cluster (about 17 s)
 def test_a_weakly_driven_chain_is_reciprocal(tmp_path):
     """The reciprocity theorem: a linear elastic (and viscously damped) system's transfer mobility
     is the same both ways. A precompressed chain driven by 0.1 N against its 10 N preload is

@@ -100,6 +100,7 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.slow  # a scheduler and a worker in their own processes (about 11 s)
 def test_external_scheduler_and_worker(tmp_path):
     port = _free_port()
     addr = f"tcp://127.0.0.1:{port}"
