@@ -265,7 +265,8 @@ def _netcdf_to(path, buffer: io.BytesIO) -> Path:
     file), never a failure inside HDF5, which can crash the process as it closes."""
     from .guard.writing import write_bytes
 
-    return write_bytes(path, buffer.getbuffer())
+    with buffer.getbuffer() as view:  # released even when the write fails (else the buffer cannot be freed)
+        return write_bytes(path, view)
 
 
 def base_attrs(scenario_toml: str, solver: dict) -> dict:
