@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -96,8 +97,8 @@ def load_scenario(name: str, overrides: list[str], shock: str | float | None = N
 
     raw, base = S.load_raw(name)
     if shock is not None:
-        both = [o.split("=", 1)[0].strip() for o in overrides
-                if o.split("=", 1)[0].strip() in ("excitations.0.shock", "excitations.0.fmax")]
+        keys = (o.split("=", 1)[0].strip() for o in overrides)
+        both = [k for k in keys if k in ("excitations.0.shock", "excitations.0.fmax")]
         if both:
             raise S.ScenarioError(f"--shock and --set {both[0]} both set the first excitation's peak force: give one")
     raw = S.apply_overrides(raw, [*overrides, *implied])
@@ -754,14 +755,11 @@ def spectrum(
         _fail(f"--amplitudes {amplitudes}: {e}")
     source = Path(scenario)
     if scenario not in S.builtin_names():
-        from .guard.reading import InputFileError, check_file
+        from .guard.reading import check_file
 
-        try:
-            check_file(source, "scenario")
-        except InputFileError as e:
-            if str(e).endswith(": no such file"):  # neither a file nor a built-in name
-                _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
-            raise
+        if not os.path.lexists(source):  # neither a file nor a built-in name
+            _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
+        check_file(source, "scenario")  # a folder, a FIFO, a dangling link, ...: exit 2 or 4 naming it
     base = scenario if scenario in S.builtin_names() else str(source.resolve())
     try:
         spec = SweepSpec.model_validate({
