@@ -16,7 +16,7 @@ import numpy as np
 from granel import scenario as S
 from granel.granular.packing import hexagonal_block, medium_from_table
 from granel.granular.system import ContactLaw, Stepper, build_system, initial_state
-from granel.materials import STEEL
+from granel.granular.materials import STEEL
 
 
 def paper_case():

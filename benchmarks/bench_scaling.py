@@ -19,7 +19,7 @@ import time
 
 from granel import scenario as S
 from granel.run import run_scenario
-from granel.units import parse_time
+from granel.io.units import parse_time
 
 
 INTEGRATOR = []  # the fast method's solid integrator: exact (default) or newmark

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from granel import scenario as S
 from granel.analysis.narrowband import response_period
-from granel.results import write_netcdf
+from granel.io.results import write_netcdf
 from granel.run import run_scenario
 
 R, n, f = 0.005, 6, 5e3

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from granel.materials import STEEL
+from granel.granular.materials import STEEL
 from granel.granular.packing import Medium, Wall, medium_from_table
 from granel.granular.system import ContactLaw, Excitation, Stepper, build_system, initial_state
 

@@ -73,7 +73,7 @@ def test_frequency_content_of_synthetic_traces(f0):
 
 def test_fig5_snapshot_is_the_solid_energy_maximum():
     """Fig. 5's instant is the stored output with the largest solid energy (not a typed-in time)."""
-    from granel.figures import snapshot_time
+    from granel.viz.figures import snapshot_time
 
     t = np.arange(0, 8e-4, 1e-6)
     e = np.exp(-0.5 * ((t - 1.234e-4) / 2e-5) ** 2) + 0.6 * np.exp(-0.5 * ((t - 5e-4) / 1e-5) ** 2)
@@ -85,7 +85,7 @@ def test_fig5_snapshot_is_the_solid_energy_maximum():
 
 def test_claim_rules():
     """The explicit rules behind the verdicts."""
-    from granel.claims import about, potential_dominance
+    from granel.studies.claims import about, potential_dominance
 
     assert about(0.141, 0.2) and not about(0.139, 0.2) and about(0.259, 0.2) and not about(0.261, 0.2)
     t = np.linspace(0, 1e-3, 1001)
@@ -159,7 +159,7 @@ def test_energy_densities_integrate_back_to_the_total():
 
 @pytest.fixture(scope="module")
 def short_study(tmp_path_factory):
-    from granel.report import paper_study
+    from granel.studies.paper import paper_study
 
     out = tmp_path_factory.mktemp("paper")
     res = paper_study(out, animations=True, extra=['simulation.duration="0.06ms"'], frames=4, fig11_window=2.5e-5)
@@ -189,7 +189,7 @@ def test_paper_study_writes_every_figure(short_study):
     # the free-edge table has a row per claim, and its runs really have no outer wall
     free = text[text.index("## What the outer walls change"):text.index("## Errata")]
     assert sum(line.startswith("| ") and line[2].isdigit() for line in free.splitlines()) == len(res["claims"])
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     assert "outer_wall = false" in read_netcdf(out / "runs-free-edge" / "plate-LSGM3-strong.nc").attrs["scenario"]
     assert "outer_wall = true" in read_netcdf(out / "runs" / "plate-LSGM3-strong.nc").attrs["scenario"]
@@ -198,7 +198,7 @@ def test_paper_study_writes_every_figure(short_study):
 @pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_report_numbers_come_from_the_data(short_study):
     from granel.analysis import peak_time
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     out, res = short_study
     ds = read_netcdf(out / "runs" / "plate-SSGMC-strong.nc")
@@ -226,7 +226,7 @@ def test_animations_have_the_frames(short_study):
 
 def _captured(runs, make):
     """Run a figure function with save_both intercepted: per saved figure, its axes."""
-    from granel import figures as F
+    from granel.viz import figures as F
 
     captured = {}
     orig = F.save_both
@@ -245,9 +245,9 @@ def _captured(runs, make):
 
 @pytest.mark.slow  # a shortened granel paper study (about 40 s)
 def test_figure_curve_counts(short_study):
-    from granel import figures as F
-    from granel.report import CASES, case_tag
-    from granel.results import read_netcdf
+    from granel.viz import figures as F
+    from granel.studies.paper import CASES, case_tag
+    from granel.io.results import read_netcdf
 
     out, _ = short_study
     runs = {c: read_netcdf(out / "runs" / f"{case_tag(c)}.nc") for c in CASES}

@@ -6,7 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from granel import animate as A
+from granel.viz import animate as A
 
 imageio = pytest.importorskip("imageio.v3")
 
@@ -15,7 +15,7 @@ imageio = pytest.importorskip("imageio.v3")
 def plate_run(tmp_path_factory):
     """A 0.03 ms strong shock on SSGM:C against the plate (31 outputs), written to NetCDF."""
     from granel import scenario as S
-    from granel.results import write_netcdf
+    from granel.io.results import write_netcdf
     from granel.run import run_scenario
 
     sc = S.load("paper", ['solid.kind="plate"', 'excitations.0.granule="SSGM:C"', 'excitations.0.shock="strong"',
@@ -47,7 +47,7 @@ def test_movie_has_the_frames_and_moves(plate_run, tmp_path, field):
 
 
 def test_energy_density_artists_equal_draw_energy_density(plate_run):
-    from granel.figures import draw_energy_density
+    from granel.viz.figures import draw_energy_density
 
     ds, _ = plate_run
     plan = A.plan_frames(ds, "energy-density", max_frames=12)
@@ -78,8 +78,8 @@ def test_blitted_frame_equals_full_redraw(plate_run, field):
 
 
 def test_deformation_outlines_follow_the_plate(plate_run):
-    from granel.figures import model_of, solid_state_at
-    from granel.plots import _element_outlines
+    from granel.viz.figures import model_of, solid_state_at
+    from granel.viz.plots import _element_outlines
 
     ds, _ = plate_run
     plan = A.plan_frames(ds, "deformation", magnification=500.0, max_frames=5)

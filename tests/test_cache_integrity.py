@@ -1,4 +1,4 @@
-"""granel's own cache is checked before it is used (solid.modal's checked cache files, granel.jit's
+"""granel's own cache is checked before it is used (solid.modal's checked cache files, granel.guard.jit's
 manifest of numba's files): a damaged entry is rebuilt, never used; a cache that cannot be
 written is skipped with a note; a lock of a dead holder is taken over at once, and a wait for a
 live one is announced and bounded."""
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granel import jit
+from granel.guard import jit
 from granel import scenario as S
 from granel.guard.owners import process_token, start_ticks
 from granel.run import run_scenario
@@ -338,7 +338,7 @@ def test_a_lock_of_another_host_is_stale_after_the_bound(plate, monkeypatch):
 
 KERNEL = """\
 from pathlib import Path
-from granel.jit import cached_njit
+from granel.guard.jit import cached_njit
 
 here = Path(__file__).parent
 njit = cached_njit((here / "kernel.py",), home=here)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from granel import claims as C
-from granel.claims import Claim, claims, construction_facts, summary_line, tally, verdict_flips
+from granel.studies import claims as C
+from granel.studies.claims import Claim, claims, construction_facts, summary_line, tally, verdict_flips
 
 BALANCE = "the energies plus the dissipated work sum to the input at every instant (all twelve cases)"
 AXIAL = "the antisymmetric axial mode 4 is not excited by the symmetric shocks (plate, six cases)"
@@ -114,7 +114,7 @@ def test_a_statement_expected_by_construction_that_fails_is_counted_as_differ():
 def test_construction_facts_of_the_paper_scenario():
     """The symmetry and the solver's bound read from a stored scenario: the paper's shocks on
     granules 3 and C are on the axis, with or without the outer walls; granule 2 is not."""
-    from granel.report import FREE_EDGE, case_scenario
+    from granel.studies.paper import FREE_EDGE, case_scenario
     from granel.scenario import to_toml
 
     def ds_of(sc, solver="fast"):
@@ -150,7 +150,7 @@ def test_verdict_flips_of_two_small_lists():
 
 
 def test_report_shows_the_held_statements_and_the_variant_table(tmp_path):
-    from granel.report import write_report
+    from granel.studies.paper import write_report
 
     m = fake_measurements()
     free = copy.deepcopy(m)

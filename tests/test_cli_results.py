@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from granel import scenario as S
 from granel.cli import app
-from granel.results import read_netcdf
+from granel.io.results import read_netcdf
 from granel.run import run_scenario
 
 runner = CliRunner()
@@ -121,7 +121,7 @@ def test_the_result_file_written_without_xarray_is_xarrays():
     the Dataset of the same variables."""
     import tempfile
 
-    from granel.results import write_netcdf, write_spec_netcdf
+    from granel.io.results import write_netcdf, write_spec_netcdf
 
     for solid in ("plate", "rigid"):
         spec = run_scenario(S.load("paper", [f'solid.kind="{solid}"', 'simulation.duration="3us"']), dataset=False)

@@ -6,7 +6,7 @@ import pytest
 from granel import scenario as S
 from granel.granular.packing import Wall, hexagonal_block
 from granel.granular.system import ContactLaw, Excitation, Stepper, initial_state
-from granel.excitation import constant_force
+from granel.granular.loads import constant_force
 from granel.run import run_problem, run_scenario
 
 from conftest import make_system

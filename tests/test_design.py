@@ -102,7 +102,7 @@ def test_the_closed_form_matches_a_run():
 def test_the_inverse_problem_lands_on_the_known_radius(tmp_path):
     """60 trials of TPE find the radius whose peak force is the target within 1 % of the closed
     form (seeds 1-4 measured within 0.23 %), on 2 workers; best.toml runs as it is."""
-    from granel.design import load_design, run_design
+    from granel.studies.design import load_design, run_design
 
     spec, base = load_design(write_design(tmp_path))
     res = run_design(spec, base, tmp_path / "out", workers=2)
@@ -124,7 +124,7 @@ def test_a_killed_study_resumes_to_the_same_trials(tmp_path):
     """With one worker and a seed, a study stopped after 4 trials with a fifth in flight (asked,
     never told: the state a kill leaves) ends, when rerun, with the same finished trials as an
     uninterrupted one: the stale trial is marked interrupted and replayed with its values."""
-    from granel.design import ask_trial, load_design, open_study, run_design
+    from granel.studies.design import ask_trial, load_design, open_study, run_design
 
     spec, base = load_design(write_design(tmp_path, trials=9, seed=5))
     straight = run_design(spec, base, tmp_path / "a", workers=1)["trials"]
@@ -149,7 +149,7 @@ def test_a_study_with_a_third_of_its_designs_invalid_completes(tmp_path):
     path.write_text(path.read_text().replace("seed = 1\n", 'seed = 1\nsampler = "random"\n'))
     res = runner.invoke(app, ["design", str(path), "-o", str(tmp_path / "out"), "--workers", "2"])
     assert res.exit_code == 0, res.output
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     ds = read_netcdf(tmp_path / "out" / "trials.nc")
     gap = ds["var_media.0.gap"].values
@@ -193,7 +193,7 @@ def test_a_folder_holding_another_study_is_refused(tmp_path):
 
 def test_the_declared_metrics_are_the_ones_a_case_reports(tmp_path):
     """Objectives are checked against `case_metric_names`: a run case reports exactly those."""
-    from granel.sweep import CaseSpec, case_metric_names, run_case
+    from granel.studies.sweep import CaseSpec, case_metric_names, run_case
 
     (tmp_path / "impact.toml").write_text(IMPACT)
     spec = CaseSpec(base="impact.toml", mode="run", pair=("G:1", "G:1"))
@@ -215,7 +215,7 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     front's span, 96 NSGA-II trials (seed 1, generations of 16) give a front whose every point
     lies within 0.05 of the true one and which leaves no part of it farther than 0.25 from a
     point found."""
-    from granel.design import load_design, run_design
+    from granel.studies.design import load_design, run_design
 
     var = ('[[variables]]\nfield = "media.0.radius"\nlow = 0.003\nhigh = 0.005\n'
            '[[variables]]\nfield = "excitations.0.fmax"\nlow = 5.0\nhigh = 20.0\n')
@@ -228,7 +228,7 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     spec, base = load_design(path)
     assert spec.sampler == "nsga2" and len(spec.objectives) == 2
     res = run_design(spec, base, tmp_path / "out", workers=2)
-    from granel.design_report import write_study_report
+    from granel.studies.design_report import write_study_report
 
     write_study_report(spec, base, res["study"], tmp_path / "out")
     front = res["best"]
@@ -298,7 +298,7 @@ def test_a_spectrum_objective_tunes_a_contact_resonance(tmp_path):
     Maximising the band's mobility over F0 in [1.5, 6] N (log) with 40 TPE trials, the mobility
     measured by granel's lock-in on the steady window, lands within 1 % (measured +0.72 %: the
     peak is flat, 1 % in F0 is 0.2 dB); the trial's metrics are the declared band metrics."""
-    from granel.design import band_metric_names, load_design, run_design
+    from granel.studies.design import band_metric_names, load_design, run_design
 
     (tmp_path / "reso.toml").write_text(RESONATOR)
     (tmp_path / "d.toml").write_text("""name = "resonance"
@@ -338,7 +338,7 @@ def test_a_constraint_keeps_the_best_design_feasible(tmp_path):
     """The inverse problem with its answer (R = 6.31 mm, 8.27 g) ruled out by a mass limit of
     6 g (R <= 5.68 mm): the best design obeys the limit and sits at it (within 3 % in R, where the
     force is closest to the target), and infeasible trials are marked so in trials.nc."""
-    from granel.design import load_design, run_design
+    from granel.studies.design import load_design, run_design
 
     path = write_design(tmp_path, trials=40, seed=4, extra='[[constraints]]\nmetric = "granular_mass_kg"\nmax = 0.006\n')
     spec, base = load_design(path)
@@ -355,7 +355,7 @@ def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
     """A study stored before a field was added (here `population` and `frequencies`) continues:
     the stored fields must match and the new ones be at their defaults; a changed value is
     another design."""
-    from granel.design import load_design, same_design
+    from granel.studies.design import load_design, same_design
 
     spec, _ = load_design(write_design(tmp_path))
     mine = json.loads(spec.model_dump_json(exclude={"trials"}))
@@ -369,7 +369,7 @@ def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
 def test_timeout_stops_the_study_and_a_rerun_continues(tmp_path):
     """--timeout stops launching trials (exit 0, says so, writes the outputs of the trials done);
     the same command without it continues to the design's count."""
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     path = write_design(tmp_path, trials=200, seed=1)
     res = runner.invoke(app, ["design", str(path), "-o", str(tmp_path / "out"), "--workers", "1", "--timeout", "1s"])

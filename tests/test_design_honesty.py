@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from granel.cli import app
-from granel.design import (BOUND_SHARE, TARGET_TOLERANCE, DesignFileError, DesignSpec, VariableSpec,
+from granel.studies.design import (BOUND_SHARE, TARGET_TOLERANCE, DesignFileError, DesignSpec, VariableSpec,
                            check_variables_matter, design_differences, design_warnings, load_design, open_study)
 from test_design import TARGET_N, peak_force, write_design
 
@@ -67,7 +67,7 @@ def test_a_best_at_a_bound_and_a_missed_target_are_warned(tmp_path):
     """Trial 1 is the best (misfit 0.2, above the 1 % tolerance) at 0.5 % of the log range from
     the low bound: both said, with its numbers; a best at 2 % of the range meeting the target
     (misfit 0.004) gives no warning, unless the objective asks for 0.001."""
-    from granel.design import best_trials
+    from granel.studies.design import best_trials
 
     spec, _ = load_design(write_design(tmp_path))
     low = 0.002 * 4 ** 0.005
@@ -90,7 +90,7 @@ def test_a_pareto_front_and_an_infeasible_study_are_warned(tmp_path):
     """On a front, the designs at a bound are counted and a target is missed only when every
     design of the front misses it; a study whose finished trials all break a constraint has no
     best design, and says so."""
-    from granel.design import best_trials
+    from granel.studies.design import best_trials
 
     path = write_design(tmp_path, extra='[[objectives]]\nmetric = "input_work_J"\ndirection = "maximize"\n')
     spec, _ = load_design(path)
@@ -115,7 +115,7 @@ def test_the_command_says_when_its_best_is_at_a_bound_and_misses_the_target(tmp_
     its misfit is Hertz's F(4 mm) / target - 1 = 1.0758 (the recorded peak is Hertz's within 5e-4,
     test_design.test_the_closed_form_matches_a_run: 1e-3 in the misfit). Exit 0; the warnings are
     in the summary, in report.md and in trials.nc."""
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     var = '[[variables]]\nfield = "media.0.radius"\nlow = 0.002\nhigh = 0.004\n'
     path = write_design(tmp_path, trials=3, seed=1, variables=var)
@@ -281,7 +281,7 @@ def test_an_old_journal_with_reused_cases_gives_no_negative_share(tmp_path):
     case's times (0.5 s in the solver) with a launch-to-result time of 0.05 s: three of them and
     one fresh trial read 1 - 2.0 / 0.85 = -135 % outside the solver. A case time longer than the
     launch-to-result time marks them: 1 - 0.5 / 0.85 = 41 %."""
-    from granel.design_report import study_speed
+    from granel.studies.design_report import study_speed
 
     spec, _ = load_design(write_design(tmp_path))
     study = _study(spec, [({"media.0.radius": r}, [0.1], {}, []) for r in (0.004, 0.005, 0.005, 0.005)],
@@ -297,8 +297,8 @@ def test_repeated_values_reuse_their_case_with_no_solver_time(tmp_path):
     reuse them, marked `reused` in trials.nc with no solver time; every fresh trial spends at most
     its case time in the solver and at most its launch-to-result time in its case, so the share
     outside the solver lies in [0, 1] and the report says how many trials reused a case."""
-    from granel.design import run_design
-    from granel.design_report import study_speed, write_study_report
+    from granel.studies.design import run_design
+    from granel.studies.design_report import study_speed, write_study_report
 
     var = '[[variables]]\nfield = "media.0.radius"\nchoices = [0.004, 0.006]\n'
     spec, base = load_design(write_design(tmp_path, trials=6, seed=1, variables=var))

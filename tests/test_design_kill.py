@@ -17,7 +17,7 @@ def _finished(out):
     """{trial number: (params, values)} of the complete trials in out's journal."""
     from optuna.trial import TrialState
 
-    from granel.design import load_design, open_study
+    from granel.studies.design import load_design, open_study
 
     spec, _ = load_design(out.parent / "d.toml")
     study = open_study(spec, out)
@@ -26,7 +26,7 @@ def _finished(out):
 
 @pytest.mark.slow
 def test_a_study_killed_on_two_workers_loses_no_finished_trial(tmp_path):
-    from granel.design import load_design, run_design
+    from granel.studies.design import load_design, run_design
 
     path = write_design(tmp_path, trials=60, seed=3)
     out = tmp_path / "out"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from granel import scenario as S
-from granel.design_report import modal_accounting, modal_lines
+from granel.studies.design_report import modal_accounting, modal_lines
 from granel.run import run_scenario
 
 

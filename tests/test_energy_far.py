@@ -107,7 +107,7 @@ def test_a_damped_chains_far_energy_is_its_motion_about_equilibrium():
 def test_a_run_with_nothing_dynamic_gives_nan_with_its_reason(tmp_path):
     """The preload alone (the pulse removed): nothing dynamic to share, so the shares and the
     input are NaN, each with its reason under `notes`, in the metrics and in a sweep case."""
-    from granel.sweep import CaseSpec, run_case
+    from granel.studies.sweep import CaseSpec, run_case
 
     ds = run("excitations.0=-")
     m = run_metrics(ds, "C:8")

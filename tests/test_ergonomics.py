@@ -239,7 +239,7 @@ granules_file = "two.csv"
     assert res.exit_code == 0, res.output
     text = " ".join(res.output.split())
     assert text.count("no [contact] table") == 1 and "mu = 0.099" in text and "alpha_n = 0.006313" in text
-    from granel.results import read_netcdf
+    from granel.io.results import read_netcdf
 
     assert "mu = 0.099" in read_netcdf(tmp_path / "a.nc").attrs["scenario"]
     (tmp_path / "two.toml").write_text(body + "[contact]\nmu = 0.0\n")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from granel import scenario as S
-from granel.benchmark import errors
+from granel.studies.benchmark import errors
 from granel.granular.system import load_scales
 from granel.run import run_scenario
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from granel.excitation import PAPER_TAU, SHOCK_LEVELS, half_sine, harmonic_burst, tabulated
+from granel.granular.loads import PAPER_TAU, SHOCK_LEVELS, half_sine, harmonic_burst, tabulated
 from granel.scenario.tables import read_load_table as read_force_csv
 from granel.granular.system import Excitation, Stepper, initial_state
 
@@ -100,7 +100,7 @@ def test_harmonic_drive_ramps_up_smoothly_and_stops():
     """A harmonic drive: zero before t0 and after its duration; within the ramps (up at the start,
     down at the end) the amplitude is (1 - cos(pi s / T_r)) / 2 of the full one; force and slope
     continuous at the ramps' ends."""
-    from granel.excitation import harmonic
+    from granel.granular.loads import harmonic
 
     A, f, t0, ph, nr = 3.0, 2e4, 1e-5, 0.4, 2.0
     h = harmonic(A, f, t0=t0, duration=1e-3, phase=ph, ramp_cycles=nr)
@@ -127,7 +127,7 @@ def test_harmonic_drive_ramps_up_smoothly_and_stops():
 def test_chirp_instantaneous_frequency(mode):
     """A chirp from f0 to f1: the phase's slope / 2 pi (by central differences) is f0 + (f1 - f0)
     s / D (linear) or f0 (f1 / f0)^(s / D) (log), and the force is A sin(phase) past the ramp."""
-    from granel.excitation import chirp, chirp_phase
+    from granel.granular.loads import chirp, chirp_phase
 
     A, f0, f1, D = 2.0, 1e3, 4e4, 2e-3
     c = chirp(A, f0, f1, D, t0=0.0, mode=mode)
@@ -148,7 +148,7 @@ def test_compiled_drive_matches_the_reference(kind):
     and a free granule's velocity after the drive against the quadrature of F / m."""
     from numba import njit
 
-    from granel.excitation import chirp, harmonic
+    from granel.granular.loads import chirp, harmonic
     from granel.granular.kernels import load_value
     from granel.granular.system import load_bundle
 

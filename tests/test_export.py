@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from granel.animate import solid_states
+from granel.viz.animate import solid_states
 from granel.cli import app
-from granel.export import EXTXYZ_PROPERTIES, ExportError, elastic_constants, parse_formats, solid_stress
-from granel.figures import model_of
-from granel.results import read_netcdf
+from granel.viz.export import EXTXYZ_PROPERTIES, ExportError, elastic_constants, parse_formats, solid_stress
+from granel.viz.figures import model_of
+from granel.io.results import read_netcdf
 from granel.solid.beam import build_beam
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate, plane_stress_forms
 

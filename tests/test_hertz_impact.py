@@ -12,7 +12,7 @@ from scipy.integrate import quad
 
 from granel.granular.packing import Wall
 from granel.granular.system import ContactLaw, Stepper, initial_state
-from granel.materials import STEEL
+from granel.granular.materials import STEEL
 
 from conftest import make_system
 
@@ -163,7 +163,7 @@ def test_overlap_formulas_of_the_input_checks_match_the_contact_law():
     contact law: the force at the static overlap is F, and the Hertz energy at the impact
     overlap is the kinetic energy 1/2 m v^2 (the law's own potential, 2/5 A delta^(5/2))."""
     from granel.granular.contact import hertz_potential, hertz_tsuji_normal
-    from granel.materials import hertz_coefficient, impact_overlap, static_overlap
+    from granel.granular.materials import hertz_coefficient, impact_overlap, static_overlap
 
     A = hertz_coefficient(2.2e11, 5e-3)
     # a power with a rounded exponent (2/3, 2/5) is off by its rounding, eps/2 of the exponent,

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from granel import scenario as S
 from granel.cli import app
-from granel.results import read_netcdf, write_netcdf
+from granel.io.results import read_netcdf, write_netcdf
 
 runner = CliRunner()
 
@@ -118,7 +118,7 @@ def test_animate_good_result_still_works(files, tmp_path):
 @pytest.fixture(scope="module")
 def summary(tmp_path_factory):
     """A sweep summary written without a cluster: 2 x 2 cases, one failed."""
-    from granel.sweep import SweepSpec, cases, summary_dataset
+    from granel.studies.sweep import SweepSpec, cases, summary_dataset
 
     spec = SweepSpec.model_validate({"base": "paper", "mode": "run", "axes": [
         {"field": "contact.mu", "values": [0.1, 0.2]}, {"field": "media.0.radius", "values": [0.01, 0.011]}]})
@@ -200,7 +200,7 @@ def test_sweep_workers_below_one_exits_2(sweep_file, tmp_path, workers):
 
 
 def test_run_sweep_refuses_zero_workers(sweep_file, tmp_path):
-    from granel.sweep import run_sweep
+    from granel.studies.sweep import run_sweep
 
     with pytest.raises(ValueError, match="workers"):
         run_sweep(sweep_file, tmp_path / "out", workers=0)
@@ -245,7 +245,7 @@ def test_sweep_bad_scheduler_address_exits_2(sweep_file, tmp_path, address):
 def test_unreachable_scheduler_is_an_io_error_and_leaves_dask_as_it_was():
     import dask
 
-    from granel.sweep import SchedulerError, _connect
+    from granel.studies.sweep import SchedulerError, _connect
 
     before = dask.config.get("scheduler", None)
     with pytest.raises(SchedulerError, match="cannot reach") as e:
@@ -271,7 +271,7 @@ def test_sweep_with_a_failed_case_exits_3_and_counts_it(sweep_file, tmp_path):
 @pytest.fixture
 def one_case(tmp_path):
     """A single valid reciprocity case (rigid, 0.005 ms) and its run_case arguments."""
-    from granel.sweep import SweepSpec, cases
+    from granel.studies.sweep import SweepSpec, cases
 
     spec = SweepSpec.model_validate({"base": "paper", "overrides": RIGID + ['excitations.0.shock="strong"'],
                                      "axes": [{"field": "contact.mu", "values": [0.099]}]})
@@ -281,13 +281,13 @@ def one_case(tmp_path):
 def _fp(spec, case, base_dir="."):
     from pathlib import Path
 
-    from granel.sweep import case_fingerprint, case_scenarios
+    from granel.studies.sweep import case_fingerprint, case_scenarios
 
     return case_fingerprint(spec, case_scenarios(spec, Path(base_dir), case), case)
 
 
 def test_failed_case_is_retried(one_case):
-    from granel.sweep import run_case
+    from granel.studies.sweep import run_case
 
     spec, case, tmp = one_case
     done = tmp / "cases" / f"{case['tag']}.json"
@@ -300,7 +300,7 @@ def test_failed_case_is_retried(one_case):
 
 
 def test_cached_case_reused_only_with_its_fingerprint(one_case):
-    from granel.sweep import run_case
+    from granel.studies.sweep import run_case
 
     spec, case, tmp = one_case
     done = tmp / "cases" / f"{case['tag']}.json"
@@ -317,7 +317,7 @@ def test_cached_case_reused_only_with_its_fingerprint(one_case):
 
 @pytest.mark.parametrize("change", ["scenario", "solver", "dt", "case_override", "mode", "pair", "version"])
 def test_fingerprint_covers(one_case, monkeypatch, change):
-    import granel.sweep as SW
+    import granel.studies.sweep as SW
 
     spec, case, _ = one_case
     before = _fp(spec, case)
@@ -340,7 +340,7 @@ def test_fingerprint_covers(one_case, monkeypatch, change):
 
 def test_sweep_arrival_is_nan_when_nothing_arrives(one_case):
     """Behind a rigid wall the measured granule only sees round-off (~1e-19 m/s): no arrival."""
-    from granel.sweep import run_case
+    from granel.studies.sweep import run_case
 
     spec, case, tmp = one_case
     r = run_case(spec.model_dump_json(), ".", case, str(tmp))
@@ -390,7 +390,7 @@ def test_reciprocity_bad_input(tmp_path, args, code, needle):
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
     """A checkpoint written at 0.004 ms of a 0.01 ms rigid run killed at 0.006 ms, and its fingerprint."""
-    from granel.checkpoint import fingerprint
+    from granel.io.checkpoint import fingerprint
     from granel.run import run_scenario
 
     sc = S.load("paper", ['solid.kind="rigid"', 'simulation.duration="0.01ms"', 'simulation.checkpoint_every="0.004ms"'])
@@ -448,7 +448,7 @@ def _damaged(ck, tmp, kind):
 @pytest.mark.parametrize("kind", ["missing", "directory", "text", "empty", "truncated", "flipped", "npy", "foreign",
                                   "pickled", "inconsistent"])
 def test_bad_checkpoint_raises_checkpoint_error_naming_the_file(checkpoint, tmp_path, kind):
-    from granel.checkpoint import CheckpointError, load_checkpoint
+    from granel.io.checkpoint import CheckpointError, load_checkpoint
 
     ck, fp = checkpoint
     p = _damaged(ck, tmp_path, kind)
@@ -459,7 +459,7 @@ def test_bad_checkpoint_raises_checkpoint_error_naming_the_file(checkpoint, tmp_
 
 
 def test_checkpoint_of_another_scenario_is_refused(checkpoint):
-    from granel.checkpoint import CheckpointError, load_checkpoint
+    from granel.io.checkpoint import CheckpointError, load_checkpoint
 
     ck, fp = checkpoint
     with pytest.raises(CheckpointError, match="different scenario") as e:
@@ -470,7 +470,7 @@ def test_checkpoint_of_another_scenario_is_refused(checkpoint):
 
 
 def test_good_checkpoint_loads_and_resume_path_raises_the_same(checkpoint, tmp_path):
-    from granel.checkpoint import CheckpointError, load_checkpoint
+    from granel.io.checkpoint import CheckpointError, load_checkpoint
     from granel.run import run_scenario
 
     ck, fp = checkpoint

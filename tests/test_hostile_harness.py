@@ -49,10 +49,10 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import granel
-import granel.benchmark
-import granel.design
-import granel.report
-import granel.sweep
+import granel.studies.benchmark
+import granel.studies.design
+import granel.studies.paper
+import granel.studies.sweep
 from granel import scenario as S
 from granel.cli import app
 from granel.guard.exits import GranelError
@@ -82,8 +82,8 @@ class Accepted(GranelError):
 CALLS: list = []
 ORIGINAL: dict = {}
 LIVE: set = set()  # stand-ins that call the real engine (the full-disk sweep)
-STAND_INS = [(granel.benchmark, "run_bench"), (granel.report, "paper_study"), (granel.sweep, "run_sweep"),
-             (granel.sweep, "run_spec"), (granel.design, "run_design")]
+STAND_INS = [(granel.studies.benchmark, "run_bench"), (granel.studies.paper, "paper_study"), (granel.studies.sweep, "run_sweep"),
+             (granel.studies.sweep, "run_spec"), (granel.studies.design, "run_design")]
 
 
 def _stand_in(name):
@@ -211,8 +211,8 @@ def assets(tmp_path_factory):
                  ["show", "scen.toml", "-o", "g.png"], ["animate", "good.nc", "-o", "g.gif", "--frames", "2", "--fps", "5"]):
         res = _invoke_raw(args, a)
         assert res.exit_code == 0, res.output
-    from granel.results import write_netcdf
-    from granel.sweep import SweepSpec, cases, summary_dataset
+    from granel.io.results import write_netcdf
+    from granel.studies.sweep import SweepSpec, cases, summary_dataset
 
     spec = SweepSpec.model_validate({"base": "paper", "mode": "run", "axes": [
         {"field": "contact.mu", "values": [0.1, 0.2]}, {"field": "media.0.radius", "values": [0.01, 0.011]}]})
@@ -1277,7 +1277,7 @@ def damage(box: Path, role: str, kind: str) -> str:
     elif kind == "other_kind":  # a sweep summary given for a result, a result for a summary
         path.write_bytes((box / ("good.nc" if valid == "summary.nc" else "summary.nc")).read_bytes())
     elif kind in ("dropped", "transposed", "nan"):
-        from granel.results import write_netcdf
+        from granel.io.results import write_netcdf
 
         ds = xr.load_dataset(path, engine="h5netcdf")
         var = "x" if valid == "good.nc" else "peak_velocity_m_s"

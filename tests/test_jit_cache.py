@@ -1,4 +1,4 @@
-"""granel's compiled-code cache is keyed by every kernel source (`granel.jit`): a kernel that
+"""granel's compiled-code cache is keyed by every kernel source (`granel.guard.jit`): a kernel that
 inlines a function of another file is recompiled when only that file changes. numba's own cache,
 keyed by each function's own file, keeps the stale machine code: the control below shows it."""
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from granel import jit
+from granel.guard import jit
 
 CALLER = """\
 {import_njit}
@@ -29,7 +29,7 @@ HELPER = """\
 def g():
     return {value}
 """
-KEYED = ("from pathlib import Path\nfrom granel.jit import cached_njit\n"
+KEYED = ("from pathlib import Path\nfrom granel.guard.jit import cached_njit\n"
          "here = Path(__file__).parent\nnjit = cached_njit((here / 'caller.py', here / 'helper.py'), home=here)")
 PLAIN = "from numba import njit"
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from granel.granular.system import Stepper, initial_state
-from granel.materials import STEEL
+from granel.granular.materials import STEEL
 
 from conftest import make_system
 

@@ -131,7 +131,7 @@ v = [1.0, 0.0]
 
 
 def test_time_units():
-    from granel.units import parse_time
+    from granel.io.units import parse_time
 
     assert parse_time("0.8ms") == pytest.approx(8e-4)
     assert parse_time("40ns") == pytest.approx(4e-8)

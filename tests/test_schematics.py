@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from granel import scenario as S
-from granel import schematics as X
+from granel.viz import schematics as X
 from granel.scenario import build_solid
 
 R_L, R_S = 10.0, 5.0  # granule radii [mm]

@@ -9,7 +9,7 @@ import pytest
 
 from granel import scenario as S
 from granel.analysis.narrowband import harmonic_amplitudes
-from granel.excitation import WallDrive
+from granel.granular.loads import WallDrive
 from granel.granular.bundles import Walls
 from granel.granular.kernels import wall_motion
 from granel.run import run_scenario

@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from granel import scenario as S
 from granel.cli import app
-from granel.spectrum import SpectrumSpec, parse_amplitudes, parse_frequencies
-from granel.sweep import SweepSpec
+from granel.studies.spectrum import SpectrumSpec, parse_amplitudes, parse_frequencies
+from granel.studies.sweep import SweepSpec
 
 CHAIN = Path(__file__).resolve().parents[1] / "scenarios" / "narrowband" / "precompressed-chain.toml"
 runner = CliRunner()

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granel.sweep import cases, load_sweep, run_case, run_sweep
+from granel.studies.sweep import cases, load_sweep, run_case, run_sweep
 
 SWEEP = """
 name = "t"

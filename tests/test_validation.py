@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 from skfem import Basis, ElementQuadS2, ElementVector, Functional, LinearForm, MeshQuad, condense, solve
 from skfem.helpers import dot
 
-from granel.excitation import constant_force
+from granel.granular.loads import constant_force
 from granel.granular.packing import Wall
 from granel.granular.system import ContactLaw, Excitation, Stepper, initial_state
 from granel.solid.beam import build_beam

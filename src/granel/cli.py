@@ -1,4 +1,5 @@
-"""The `granel` command line (typer + rich)."""
+"""The `granel` command line (typer + rich).
+May import: everything."""
 
 from __future__ import annotations
 
@@ -231,8 +232,8 @@ def run(
 ):
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
-    from .checkpoint import CheckpointError
-    from .results import write_spec_netcdf
+    from .io.checkpoint import CheckpointError
+    from .io.results import write_spec_netcdf
     from .run import run_scenario, summarize
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
@@ -245,7 +246,7 @@ def run(
     sc = _load_or_fail(scenario, ov, _shock_level(shock), implied)
     _note_contact_defaults(sc)
     ckpt = _check_run_paths(output, sc, scenario, resume, sc.simulation.checkpoint_every > 0)
-    from .results import remove_stale_temporaries
+    from .io.results import remove_stale_temporaries
 
     for path in (output, ckpt):
         for tmp in remove_stale_temporaries(path):
@@ -328,7 +329,7 @@ def show(
     if resolved:
         sys.stdout.write(S.to_toml(sc))
         return
-    from .plots import plot_geometry
+    from .viz.plots import plot_geometry
 
     _picture_output(output, "-o", _scenario_inputs(scenario, sc))
     plot_geometry(sc, output)
@@ -342,7 +343,7 @@ def init(
 ):
     """Write a scenario to start from: the paper's set-up with every field shown, each with its
     description, and the optional ones listed commented out. An existing file is never replaced."""
-    from .results import atomic_path
+    from .io.results import atomic_path
     from .scenario.template import template
 
     if not name.strip() or "/" in name or name.startswith("."):
@@ -395,7 +396,7 @@ def modes(
         "modes_computed": md.count,
     }
     if plot:
-        from .plots import plot_modes
+        from .viz.plots import plot_modes
 
         which = tuple(k for k in (0, 3, 6) if k < md.count)
         plot_modes(model, md, kinds, which, plot)
@@ -419,7 +420,7 @@ def paper(
     workers: int = typer.Option(2, min=1, help="processes rendering the movies"),
 ):
     """Regenerate the paper: twelve cases, modal analysis, Figs. 1-11, animations, report.md."""
-    from .report import CASES, paper_study
+    from .studies.paper import CASES, paper_study
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
@@ -445,7 +446,7 @@ def paper(
         color = {"agree": "green", "by construction": "cyan"}.get(c["verdict"], "yellow")
         t.add_row(str(k), c["claim"], c["paper"], c["granel"], f"[{color}]{c['verdict']}[/]")
     Console().print(t)
-    # agreement counted only over the statements that could have failed (granel.claims.tally)
+    # agreement counted only over the statements that could have failed (granel.studies.claims.tally)
     console.print(f"{res['summary']}; report: {res['report']}; total {res['total_s']:.1f} s")
 
 
@@ -464,8 +465,8 @@ def reciprocity(
 ):
     """Run both directions (shock at A measured at B, and the reverse) and compare."""
     from .analysis.reciprocity import reciprocity_metrics
-    from .figures import fig3_velocities
-    from .results import write_netcdf
+    from .viz.figures import fig3_velocities
+    from .io.results import write_netcdf
     from .run import run_scenario
 
     if a == b:
@@ -527,7 +528,7 @@ def animate(
     fps: int = typer.Option(20, help="frames per second"),
 ):
     """Render a movie of a run (Appendix C)."""
-    from .animate import MAX_FPS, ResultFileError, animate as _animate, read_result
+    from .viz.animate import MAX_FPS, ResultFileError, animate as _animate, read_result
 
     # the options first, before anything is read
     if frames < 1:
@@ -566,7 +567,7 @@ def bench(
     """The paper's algorithm and the fast method (its exact integrator, and Newmark at dtau0) side by
     side in one process: wall times, ratios, steps, deviations; fresh-process and `granel paper`
     times."""
-    from .benchmark import run_bench
+    from .studies.benchmark import run_bench
 
     only = _bench_cases(cases)
     _bench_duration(duration)
@@ -593,7 +594,7 @@ def _bench_cases(cases: str | None) -> list[str] | None:
     """`bench --cases`: paper case tags, checked before any benchmark runs."""
     if cases is None:
         return None
-    from .report import CASES, case_tag
+    from .studies.paper import CASES, case_tag
 
     tags = [case_tag(c) for c in CASES]
     asked = [c.strip() for c in cases.split(",")]
@@ -609,9 +610,9 @@ def _bench_duration(duration: str | None) -> None:
     if duration is None:
         return
     from .guard.exits import InputError
-    from .report import case_scenario
+    from .studies.paper import case_scenario
     from .scenario.estimate import check_needs
-    from .units import parse_time
+    from .io.units import parse_time
 
     try:
         t = parse_time(duration)
@@ -629,7 +630,7 @@ def _bench_duration(duration: str | None) -> None:
 def _cluster_errors(scheduler, source, write_error: str):
     """A command on a dask cluster ends on a scheduler error (exit 2 or 4), an invalid scenario
     or input file (2, naming `source`) or an unwritable output (4, `write_error`)."""
-    from .sweep import SchedulerError
+    from .studies.sweep import SchedulerError
 
     try:
         yield
@@ -668,7 +669,7 @@ def sweep(
     """Run a parameter sweep on dask.distributed; re-running skips finished cases.
     Exit code 3 if any case failed."""
     _check_workers(workers)
-    from .sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
+    from .studies.sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
 
     try:
         spec, base_dir = load_sweep(sweep_file)
@@ -699,7 +700,7 @@ def sweep(
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
     if spec.mode == "spectrum":
-        from .spectrum import write_spectrum
+        from .studies.spectrum import write_spectrum
 
         try:
             write_spectrum(ds, spec.spectrum, out / "spectrum.nc")
@@ -738,8 +739,8 @@ def spectrum(
     Exit code 3 if any run failed."""
     from pydantic import ValidationError
 
-    from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
-    from .sweep import SweepSpec, check_spectrum, run_spec
+    from .studies.spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
+    from .studies.sweep import SweepSpec, check_spectrum, run_spec
 
     _check_workers(workers)
     for name, value in (("--cycles", cycles), ("--window-cycles", window_cycles), ("--ramp-cycles", ramp_cycles)):
@@ -780,7 +781,7 @@ def spectrum(
         _fail(msg if scenario in msg or "--drive" in msg or "--measure" in msg else f"{scenario}: {msg}")
     work = out.with_suffix(".cases")
     from .guard.outputs import OutputPlan
-    from .sweep import sweep_inputs
+    from .studies.sweep import sweep_inputs
 
     plan = OutputPlan(inputs=sweep_inputs(spec, Path(".")))
     plan.file(out, "-o")
@@ -821,10 +822,10 @@ def design(
     if trials is not None and trials < 1:
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
-    from .design import DesignFileError, check_design, load_design, run_design
-    from .design_report import write_study_report
+    from .studies.design import DesignFileError, check_design, load_design, run_design
+    from .studies.design_report import write_study_report
     from .guard.outputs import STAMP, OutputPlan
-    from .sweep import sweep_inputs
+    from .studies.sweep import sweep_inputs
 
     try:
         spec, base_dir = load_design(design_file)
@@ -895,8 +896,8 @@ def export(
     the granules at every output and the plate's or beam's nodal displacement, velocity, element
     energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
     stored solid output."""
-    from .export import ExportError, count_steps, export_result, parse_formats, read_export_result
-    from .figures import model_of
+    from .viz.export import ExportError, count_steps, export_result, parse_formats, read_export_result
+    from .viz.figures import model_of
 
     try:
         formats = parse_formats(format_)
@@ -934,7 +935,7 @@ def map_(
 ):
     """Draw a design map: a metric over two sweep axes (panels over a third)."""
     from .guard.reading import check_file
-    from .sweep import SummaryFileError, plot_map, read_summary
+    from .studies.sweep import SummaryFileError, plot_map, read_summary
 
     check_file(summary, "sweep summary")
     _picture_output(output, "--output", [summary])

@@ -1,4 +1,5 @@
-"""The built problem: what the solvers receive (never the scenario itself)."""
+"""The built problem: what the solvers receive (never the scenario itself).
+May import: coupling, solid, granular."""
 
 from __future__ import annotations
 

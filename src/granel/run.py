@@ -3,7 +3,7 @@
 This is the one place that knows both the scenario and the solvers: below it, solvers receive
 built objects (`problem.Problem`); above it, figures and analysis read result Datasets (and
 rebuild the models of a result through `built_from_result`).
-"""
+May import: scenario, problem, coupling, solid, granular, io, guard."""
 
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ from dataclasses import replace
 import numpy as np
 
 from . import scenario as S
-from .checkpoint import fingerprint
+from .io.checkpoint import fingerprint
 from .coupling.driver import drive
 from .granular.system import load_scales
 from .problem import Problem
-from .results import base_attrs, trajectory_spec
+from .io.results import base_attrs, trajectory_spec
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
@@ -102,7 +102,7 @@ def load_kinks(system) -> list[float]:
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,
                 max_wall: float | None = None, dataset: bool = True):
-    """Solve a built problem and return its result Dataset (a `results.ResultSpec` with
+    """Solve a built problem and return its result Dataset (a `io.results.ResultSpec` with
     dataset=False: no xarray needed), after at most `max_wall` seconds of solving
     (`coupling.driver.WallTimeExceeded` beyond)."""
     from .guard.fingerprints import encode
@@ -136,7 +136,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
 
 def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, max_wall: float | None = None,
                  dataset: bool = True):
-    """Run a validated scenario and return its result Dataset (or `results.ResultSpec`)."""
+    """Run a validated scenario and return its result Dataset (or `io.results.ResultSpec`)."""
     return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
 
 
@@ -175,13 +175,13 @@ def built_from_result(ds):
 
 
 def load_result(path, what: str = "result file"):
-    """A run's result file, read and checked: its structure (`results.check_result_schema`) and
+    """A run's result file, read and checked: its structure (`io.results.check_result_schema`) and
     its agreement with the scenario it carries (the same granules, contacts, walls and, for an
     elastic solid, a modal or reduced state of the solid's size). ResultFileError naming the file:
     code 4 if it cannot be read as NetCDF, 2 if it is not a result or is damaged."""
     from pathlib import Path
 
-    from .results import ResultFileError, check_result_schema, read_netcdf_or
+    from .io.results import ResultFileError, check_result_schema, read_netcdf_or
 
     path = Path(path)
     ds = read_netcdf_or(path, ResultFileError, what)
@@ -192,7 +192,7 @@ def load_result(path, what: str = "result file"):
 
 def check_result_model(ds, name) -> None:
     """ResultFileError (code 2) unless the result's variables fit the model its scenario builds."""
-    from .results import ResultFileError, wall_names
+    from .io.results import ResultFileError, wall_names
 
     try:
         _, system, solid = built_from_result(ds)

@@ -1,9 +1,6 @@
-"""Post-processing of result Datasets: reciprocity metrics, modal energies, energy densities,
-narrowband measures (steady state, harmonics, lock-in, transmissibility).
-
-Every function takes result Datasets (as written by `granel run`) or plain arrays and returns
-numbers or arrays; nothing here runs a simulation.
-"""
+"""Functions of result Datasets (or plain arrays): reciprocity metrics, modal energies, energy
+densities, narrowband measures; nothing here runs a simulation.
+May import: solid, granular, io, guard."""
 
 from .modal import (  # noqa: F401
     accumulated_modal_energy,

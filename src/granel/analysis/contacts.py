@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..granular.static import hertz_force_stiffness
-from ..materials import effective_modulus, effective_radius, hertz_coefficient
+from ..granular.materials import effective_modulus, effective_radius, hertz_coefficient
 
 
 def _pairs(system) -> np.ndarray:

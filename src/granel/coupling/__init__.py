@@ -1,1 +1,3 @@
-"""Coupled stepping: granular RK4 with the solid (rigid, plate or beam) at the interface."""
+"""Coupled stepping of the granules with the solid at the interface: the solvers (the paper's
+algorithm, exact modal propagation, Newmark, sparse) and the one driver loop.
+May import: granular, solid, io, guard."""

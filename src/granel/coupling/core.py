@@ -30,7 +30,7 @@ import numpy as np
 from ..granular.bundles import InterfaceForces, Motion, interface_buffers, motion_buffers
 from ..granular.contact import friction_eigenvalue, friction_map_slope
 from ..granular.kernels import friction_rate, interface_forces, moved_beyond, rk4_substepped
-from ..jit import njit
+from ..guard.jit import njit
 
 # step policies and statuses
 POLICY_CONSTANT, POLICY_B1 = 0, 1

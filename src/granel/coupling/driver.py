@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checkpoint import load_checkpoint, save_checkpoint
-from ..trajectory import Trajectory
+from ..io.checkpoint import load_checkpoint, save_checkpoint
+from ..io.trajectory import Trajectory
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,7 @@ from ..granular.bundles import ACC_WORK, InterfaceForces, Motion, interface_buff
 from ..granular.contact import friction_map_slope, tanh_friction
 from ..granular.kernels import (friction_rate, granule_energies, interface_forces, load_value, motion_at, moved_beyond,
                                 overlaps, rhs, rk4_step, rk4_substepped, wall_forces)
-from ..jit import njit
+from ..guard.jit import njit
 from ..solid.propagation import basis_values, interpolation_taylor, weights_at
 from . import core
 

@@ -1,1 +1,3 @@
-"""Discrete elements: packings, contact laws (eqs. 2-6), the compiled RHS and RK4 stepping."""
+"""Discrete elements: materials, packings, loads, contact laws (eqs. 2-6), the compiled
+right-hand side and RK4 stepping, static equilibria.
+May import: guard."""

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import njit
+from ..guard.jit import njit
 
 ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
 
@@ -58,7 +58,7 @@ class Walls(NamedTuple):
     tangent: np.ndarray  # (nw, 2) unit vector from p0 to p1
     length: np.ndarray  # (nw,)
     normal: np.ndarray  # (nw, 2) unit normal into the granular side
-    drive: np.ndarray  # (nw, 6) a moving wall's `excitation.WallDrive.params` (frequency 0: at rest)
+    drive: np.ndarray  # (nw, 6) a moving wall's `granular.loads.WallDrive.params` (frequency 0: at rest)
 
 
 class Points(NamedTuple):

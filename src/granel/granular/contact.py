@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from ..jit import njit
+from ..guard.jit import njit
 
 
 @njit(cache=True, inline="always")

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..guard.jit import njit
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK
 from .contact import contact_law, contact_law_derivatives, hertz_potential
 
@@ -121,7 +121,7 @@ def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
 
 @njit(cache=True, inline="always")
 def _ramp(s, t_ramp, duration):
-    """`excitation.ramp`: the drives' envelope, up over the first t_ramp and down over the last."""
+    """`granular.loads.ramp`: the drives' envelope, up over the first t_ramp and down over the last."""
     if t_ramp <= 0.0:
         return 1.0
     x = min(s, duration - s) / t_ramp
@@ -131,7 +131,7 @@ def _ramp(s, t_ramp, duration):
 @njit(cache=True, inline="always")
 def wall_motion(walls, w, t):
     """(s, ds/dt): wall w's displacement along its normal at time t and its speed, 0 for a wall
-    at rest; `excitation.WallDrive` has the formula and its Python twin."""
+    at rest; `granular.loads.WallDrive` has the formula and its Python twin."""
     par = walls.drive[w]
     f = par[1]
     tau = t - par[2]

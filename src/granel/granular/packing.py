@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..excitation import WallDrive
-from ..materials import Material
+from .loads import WallDrive
+from .materials import Material
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..excitation import KIND_CODES, LOAD_PARAMS, LoadHistory
-from ..materials import (
+from .loads import KIND_CODES, LOAD_PARAMS, LoadHistory
+from .materials import (
     damping_coefficient,
     effective_mass,
     effective_modulus,

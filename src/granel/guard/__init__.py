@@ -11,5 +11,7 @@
   the process's start time);
 - `resources`: memory and disk estimated before they are spent;
 - `fingerprints`: the contents of every input a resumable command reads;
-- `signals`: Ctrl-C and SIGTERM end any command with one line (exit 130 / 143).
-"""
+- `signals`: Ctrl-C and SIGTERM end any command with one line (exit 130 / 143);
+- `jit`: numba's cache of the compiled kernels, keyed by all their sources and verified.
+
+May import: nothing of granel but its version."""

@@ -1,5 +1,6 @@
 """Scenarios: the TOML schema (`schema`), file input and overrides (`files`), and building the
-objects the solvers receive (`build`). Every error names the offending field and value."""
+objects the solvers receive (`build`); every error names the offending field and value.
+May import: problem, coupling, solid, granular, io, guard."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from ..excitation import SHOCK_LEVELS  # noqa: F401
+from ..granular.loads import SHOCK_LEVELS  # noqa: F401
 from .build import (  # noqa: F401
     HERTZ_DURATION,
     build_granular,

@@ -14,7 +14,7 @@ from ..coupling.solver import SolverSettings
 from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table
 from ..guard.reading import InputFileError
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state, load_scales
-from ..materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
+from ..granular.materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
 from ..solid.beam import build_beam
@@ -404,6 +404,6 @@ def equilibrate(system, state, solid):
     except NoEquilibrium as err:
         raise ScenarioError(f"simulation.equilibrate: {err}") from None
     state.y[: 2 * system.n] = eq.pos.ravel()
-    from ..results import wall_names
+    from ..io.results import wall_names
 
     return eq.solid_forces, eq.summary(), eq.contacts(system.labels, wall_names(system))

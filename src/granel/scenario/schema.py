@@ -10,10 +10,10 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 from pydantic.fields import FieldInfo
 
-from ..excitation import PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst
+from ..granular.loads import PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst
 from ..guard.exits import InputError
-from ..materials import Material
-from ..units import parse_time
+from ..granular.materials import Material
+from ..io.units import parse_time
 
 
 class ScenarioError(InputError):
@@ -311,7 +311,7 @@ class WallMotionSpec(_Strict):
         return self
 
     def drive(self):
-        from ..excitation import WallDrive
+        from ..granular.loads import WallDrive
 
         return WallDrive(self.amplitude, self.frequency, self.t0, self.duration if self.duration is not None else math.inf,
                          self.phase, self.ramp_cycles)

@@ -39,7 +39,7 @@ def read_load_table(path: Path):
     times strictly increase, at least two rows; errors name the file and the line."""
     import numpy as np
 
-    from ..excitation import tabulated
+    from ..granular.loads import tabulated
     from ..guard.reading import InputFileError, number, read_text
 
     text = read_text(path, "load table")

@@ -1,2 +1,3 @@
-"""Linear elastic solids: plane-stress Q8 plate with rigid layers, Euler-Bernoulli beam,
-Newmark time stepping and modal analysis, behind one interface (`SolidModel`)."""
+"""Linear elastic solids: plane-stress Q8 plate with rigid layers, Euler-Bernoulli beam, modes and
+their disk cache, Newmark, exact modal propagation; behind one interface (`SolidModel`).
+May import: guard."""

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..guard.jit import njit
 
 SERIES_LIMIT = 2.0
 

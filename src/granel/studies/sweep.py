@@ -43,9 +43,9 @@ import numpy as np
 import xarray as xr
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from . import __version__
-from . import scenario as S
-from .results import ResultFileError
+from .. import __version__
+from .. import scenario as S
+from ..io.results import ResultFileError
 from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
@@ -192,7 +192,7 @@ class SweepSpec(CaseSpec):
 def load_sweep(path) -> tuple[SweepSpec, Path]:
     """A sweep file -> (SweepSpec, its folder); any problem reading, parsing or validating it
     names the file (and the line or field), with the reader's exit code."""
-    from .guard.reading import InputFileError, read_toml
+    from ..guard.reading import InputFileError, read_toml
 
     path = Path(path)
     try:
@@ -285,7 +285,7 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
     """Fail early (ScenarioError naming `drive` or `measure`) when a spectrum's granules are not
     in the base scenario, or both directions would drive the same granule; builds the first
     case's granular systems, which also checks their scenarios."""
-    from .scenario.build import build_granular
+    from ..scenario.build import build_granular
 
     sp = spec.spectrum
     if sp.both_directions and sp.drive == sp.measure:
@@ -342,8 +342,8 @@ def _cached_case(done: Path, fp: str, case: dict) -> dict | None:
 def _cached_run(path: Path, sc: S.Scenario):
     """A run's stored Dataset, if it holds the run of scenario `sc` (its text and the contents of
     the files it reads) by this granel version, and is a sound result."""
-    from .guard.fingerprints import decode
-    from .results import check_result_schema, read_netcdf
+    from ..guard.fingerprints import decode
+    from ..io.results import check_result_schema, read_netcdf
 
     if not path.exists():
         return None
@@ -391,9 +391,9 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
     arrival_solid_*_s is the first time the solid holds 1 % of the input work. Run mode adds
     `chain_metrics` (cutoff_Hz), NaN where a run has no precompressed chain, its reason under
     `notes`; so are the energy shares of a run with nothing dynamic to share (`run_metrics`)."""
-    from .analysis.reciprocity import reciprocity_metrics, run_metrics
-    from .results import write_netcdf
-    from .run import run_scenario
+    from ..analysis.reciprocity import reciprocity_metrics, run_metrics
+    from ..io.results import write_netcdf
+    from ..run import run_scenario
 
     import time
 
@@ -440,7 +440,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
                 res["notes"] = notes
         else:
             ds = runs["run"]
-            from .analysis.reciprocity import excitation_of
+            from ..analysis.reciprocity import excitation_of
 
             label, _ = excitation_of(ds)
             measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
@@ -458,8 +458,8 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
         res["status"] = f"error: {type(e).__name__}: {e}"
         res["traceback"] = traceback.format_exc(limit=3)
     res["wall_s"] = time.perf_counter() - start
-    from .guard.owners import MARK
-    from .guard.writing import write_text
+    from ..guard.owners import MARK
+    from ..guard.writing import write_text
 
     write_text(done, json.dumps({"written_by": f"{MARK} {__version__}", **res}, default=float))
     return res
@@ -491,8 +491,8 @@ def chain_metrics(sc: S.Scenario, ds) -> tuple[dict[str, float], dict[str, str]]
     highest mode measured in the free response, over the mode's share of the cut-off for the
     chain's ends). A run without a static precompression is NaN at once (its reason noted); a
     chain's costs a modal fit of its beads' velocities (about 0.1 s for 8 beads)."""
-    from .analysis.narrowband import CutoffError, cutoff_frequency
-    from .scenario.build import build_granular
+    from ..analysis.narrowband import CutoffError, cutoff_frequency
+    from ..scenario.build import build_granular
 
     try:
         if "equilibrium_contact" not in ds:
@@ -507,8 +507,8 @@ def force_metrics(scenarios: list[tuple[str, S.Scenario]], runs: dict) -> dict[s
     """Every case's size and peak forces (`analysis.contacts`): granular_mass_kg, footprint_m2
     (of the first run's scenario) and, per run, peak_contact_force_N and peak_wall_force_N,
     suffixed _fwd / _bwd in reciprocity mode (forward first) and by direction in spectrum mode."""
-    from .analysis.contacts import design_size, peak_forces
-    from .scenario.build import build_granular
+    from ..analysis.contacts import design_size, peak_forces
+    from ..scenario.build import build_granular
 
     out: dict[str, float] = {}
     suffix = {0: "_fwd", 1: "_bwd"} if len(scenarios) == 2 else {0: ""}
@@ -597,9 +597,9 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     writable) propagates. Writes out_dir/summary.nc and returns it."""
     from dask.distributed import Client, as_completed
 
-    from .guard.signals import local_cluster
+    from ..guard.signals import local_cluster
 
-    from .results import write_netcdf
+    from ..io.results import write_netcdf
 
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
@@ -650,7 +650,7 @@ def read_summary(path) -> xr.Dataset:
     """A sweep's summary.nc, checked: raises SummaryFileError (naming the file) for a directory,
     an unreadable, truncated or non-NetCDF file, or a NetCDF file that is not a granel sweep
     summary (no `sweep` description, no `status`, dimensions other than the sweep's axes)."""
-    from .results import read_netcdf_or
+    from ..io.results import read_netcdf_or
 
     path = Path(path)
     ds = read_netcdf_or(path, SummaryFileError, "sweep summary file")
@@ -678,7 +678,7 @@ def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import save
+    from ..viz.plots import save
 
     if metric not in summary:
         raise ValueError(f"--metric {metric!r}: unknown metric; available: {', '.join(v for v in summary.data_vars if v != 'status')}")

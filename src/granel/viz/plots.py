@@ -16,14 +16,14 @@ Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a 
 
 def save(fig, path: str | Path, dpi: int = 200) -> Path:
     """A figure to `path`, atomically and marked as granel's (`guard.writing.save_figure`), closed."""
-    from .guard.writing import save_figure
+    from ..guard.writing import save_figure
 
     return save_figure(fig, path, dpi=dpi, bbox_inches="tight")
 
 
 def plot_geometry(sc, output: str | Path, ax=None):
     """The packing with labels, walls, the solid, the solid contact points and excitations."""
-    from .run import built_models
+    from ..run import built_models
 
     system = built_models(sc)[0]
     own = ax is None

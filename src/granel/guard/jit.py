@@ -34,10 +34,26 @@ from pathlib import Path
 import numba
 from numba.core import config
 
-PACKAGE = Path(__file__).resolve().parent
-# every module that defines compiled functions: they inline and call each other
-KERNEL_SOURCES = tuple(PACKAGE / p for p in ("granular/bundles.py", "granular/contact.py", "granular/kernels.py",
-                                              "solid/propagation.py", "coupling/core.py", "coupling/exact.py"))
+PACKAGE = Path(__file__).resolve().parent.parent  # granel/
+
+
+def kernel_sources(package: Path = PACKAGE) -> tuple[Path, ...]:
+    """Every module of the package that compiles functions (it imports `njit` from here): they
+    inline and call each other, so they share one key."""
+    found = []
+    for p in sorted(package.rglob("*.py")):
+        if "__pycache__" in p.parts:
+            continue
+        try:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            continue
+        if "import njit" in text and "guard.jit" in text and p.name != "jit.py":
+            found.append(p)
+    return tuple(found)
+
+
+KERNEL_SOURCES = kernel_sources()
 PREFIX = "kernels-"
 KEEP = 4
 
@@ -201,7 +217,7 @@ def _listing(folder: Path) -> dict:
 
 
 def _crc32(path: Path) -> tuple[int, int]:
-    from .guard.fingerprints import file_crc32
+    from .fingerprints import file_crc32
 
     return file_crc32(path)
 
@@ -297,7 +313,7 @@ def _record_kernel(folder: Path, base: str) -> None:
     checksums in the folder's manifest, merged with what other processes recorded there, and
     sync that. A manifest that cannot be written leaves the kernel unrecorded: the next process
     compiles it again."""
-    from .guard.writing import fsync_path, write_text
+    from .writing import fsync_path, write_text
 
     try:
         with _manifest_lock(folder):

@@ -89,7 +89,7 @@ def _quiet():
 
 def _save(fig, path: Path) -> Path:
     """A finished figure to `path` (PNG at 130 dpi), closed."""
-    from .guard.writing import save_figure
+    from ..guard.writing import save_figure
 
     fig.tight_layout()
     return save_figure(fig, path, dpi=130)
@@ -135,9 +135,9 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
 
 def draw_design(ax, sc, title: str) -> None:
     """A scenario's granules, walls and solid (no labels), in mm."""
-    from .run import built_models
-    from .scenario.build import present_solid
-    from .schematics import MM, draw_granules, draw_solid, draw_walls
+    from ..run import built_models
+    from ..scenario.build import present_solid
+    from ..viz.schematics import MM, draw_granules, draw_solid, draw_walls
 
     system, model = built_models(sc)
     depth = 0.04 * float(np.ptp(system.pos0[:, 1]) + 2 * system.radius.max()) * MM
@@ -165,8 +165,8 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .analysis.reciprocity import input_energy
-    from .results import read_netcdf
+    from ..analysis.reciprocity import input_energy
+    from ..io.results import read_netcdf
 
     if len(rows) < 2 or rows[1]["tight"].get("status") != "ok" or rows[0]["tight"].get("status") != "ok":
         return None
@@ -219,9 +219,9 @@ def modal_accounting(ds, top: int = TOP_MODES) -> dict | None:
     with their frequency and kind (`solid.modal.classify_modes`), the modes that hold 90 % of it
     (eq. 16), and the solid's peak and time-averaged energy over the input work. None for a run
     without modal coordinates (no solid, a rigid one, or a large solid stored in nodes)."""
-    from .analysis.modal import (modal_coordinates, modal_energies, modes_for_fraction, time_averaged_accumulation,
+    from ..analysis.modal import (modal_coordinates, modal_energies, modes_for_fraction, time_averaged_accumulation,
                                  time_averaged_shares)
-    from .analysis.reciprocity import input_energy
+    from ..analysis.reciprocity import input_energy
 
     if "solid_eta" not in ds or ds.sizes.get("mode", 0) == 0:
         return None
@@ -242,8 +242,8 @@ def modal_accounting(ds, top: int = TOP_MODES) -> dict | None:
 
 def _mode_kinds(ds, which: list[int]) -> list[str]:
     """The kinds of modes `which` (0-based) of a run's solid, rebuilt from its scenario."""
-    from .run import built_from_result
-    from .solid.modal import all_modes, classify_modes
+    from ..run import built_from_result
+    from ..solid.modal import all_modes, classify_modes
 
     try:
         _, _, model = built_from_result(ds)
@@ -254,7 +254,7 @@ def _mode_kinds(ds, which: list[int]) -> list[str]:
 
 def modal_rows(out: Path, rows: list[dict]) -> list[tuple[str, str, dict]]:
     """(design, run, accounting) for the base and the best design at the tighter accuracy."""
-    from .results import read_netcdf
+    from ..io.results import read_netcdf
 
     found = []
     for r in rows[:2]:
@@ -422,8 +422,8 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
     lines += ["Files: `trials.nc` (every trial), " + ("`best.toml`" if len(spec.objectives) == 1 else "`pareto/NN.toml`")
               + " (runnable by `granel run`), `study.journal` (Optuna's journal: a rerun continues it), "
               "`reevaluation/cases/` (the runs above).", ""]
-    from .guard.owners import text_mark
-    from .guard.writing import write_text
+    from ..guard.owners import text_mark
+    from ..guard.writing import write_text
 
     return write_text(out / "report.md", "\n".join([text_mark("<!--"), *lines]))
 

@@ -16,11 +16,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import __version__
-from .guard.exits import GranelError
-from .guard.owners import process_token, token_state
-from .guard.writing import atomic_path  # noqa: F401 - the one atomic writer, used through here too
-from .guard.writing import remove_stale_temporaries as guard_remove_stale
+from .. import __version__
+from ..guard.exits import GranelError
+from ..guard.owners import process_token, token_state
+from ..guard.writing import atomic_path  # noqa: F401 - the one atomic writer, used through here too
+from ..guard.writing import remove_stale_temporaries as guard_remove_stale
 
 
 def remove_stale_temporaries(path: str | Path) -> list[Path]:
@@ -77,7 +77,7 @@ def read_netcdf_or(path: str | Path, error=ResultFileError, what: str = "result 
     """`read_netcdf` for a file given by a user (`guard.reading.check_file` first): a file that
     cannot be read as NetCDF (truncated, foreign bytes) raises `error` (an exception class) with a
     message naming the file (exit code 4)."""
-    from .guard.reading import InputFileError, check_file
+    from ..guard.reading import InputFileError, check_file
 
     path = Path(path)
     try:
@@ -254,7 +254,7 @@ def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
 
 def storable_attrs(attrs: dict) -> dict:
     """The attributes with every string `guard.writing.storable`."""
-    from .guard.writing import storable
+    from ..guard.writing import storable
 
     return {k: storable(v) if isinstance(v, str) else v for k, v in attrs.items()}
 
@@ -263,7 +263,7 @@ def _netcdf_to(path, buffer: io.BytesIO) -> Path:
     """A NetCDF file built in memory to `path`, atomically and synced. HDF5 never writes to the
     disk itself: a full disk is then one clean OSError of a plain write (exit 4, no partial
     file), never a failure inside HDF5, which can crash the process as it closes."""
-    from .guard.writing import write_bytes
+    from ..guard.writing import write_bytes
 
     with buffer.getbuffer() as view:  # released even when the write fails (else the buffer cannot be freed)
         return write_bytes(path, view)

@@ -31,9 +31,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .analysis.modal import modes_for_fraction, time_averaged_shares
-from .analysis.reciprocity import arrival_time, directed_velocity, excitation_of
-from .analysis.signals import dominant_frequency, peak_time, peak_width, zero_crossing_frequency
+from ..analysis.modal import modes_for_fraction, time_averaged_shares
+from ..analysis.reciprocity import arrival_time, directed_velocity, excitation_of
+from ..analysis.signals import dominant_frequency, peak_time, peak_width, zero_crossing_frequency
 
 SOLIDS = ("plate", "beam")
 SIDES = ("LSGM:3", "SSGM:C")
@@ -127,8 +127,8 @@ def construction_facts(ds) -> dict:
     ledger_tol times the larger of the loads' energy scale and the input work; NaN when the solver
     enforces none: the paper's algorithm, fixed steps, Newmark); `ledger_tol`; and
     `mirror_symmetric` (`_mirror_symmetric`). Without a readable scenario: no guarantee."""
-    from . import scenario as S
-    from .granular.system import load_scales
+    from .. import scenario as S
+    from ..granular.system import load_scales
 
     out = {"balance_bound_rel": float("nan"), "ledger_tol": float("nan"), "mirror_symmetric": False}
     try:
@@ -149,7 +149,7 @@ def construction_facts(ds) -> dict:
 
 def run_measures(ds) -> dict:
     """The numbers of one run that the claims use (energies as fractions of the input work)."""
-    from .figures import modal_energy_history
+    from ..viz.figures import modal_energy_history
 
     t = ds["time"].values
     w = float(ds["input_work"].values.max())

@@ -17,7 +17,7 @@ def fingerprint(text: str) -> str:
 
 def save_checkpoint(path: str | Path, fp: str, arrays: dict, recorded: dict, times: list) -> Path:
     path = Path(path)
-    from .guard.owners import MARK
+    from ..guard.owners import MARK
 
     payload = {"__fingerprint": np.array(fp), "__times": np.asarray(times), "__" + MARK.replace(" ", "_"): np.array(1)}
     for k, v in arrays.items():

@@ -136,7 +136,7 @@ def parse_amplitudes(text: str) -> list[float]:
 def measuring_direction(sc: dict, label: str) -> np.ndarray:
     """The unit direction along which granule `label` is measured: the direction the scenario's
     first excitation would push it (`toward_solid` resolved for its medium, or the vector)."""
-    from .analysis.reciprocity import toward_solid
+    from ..analysis.reciprocity import toward_solid
 
     d = sc["excitations"][0].get("direction", "toward_solid")
     if isinstance(d, str):
@@ -147,7 +147,7 @@ def measuring_direction(sc: dict, label: str) -> np.ndarray:
 
 def run_measures(ds, measured: str, window_cycles: float) -> dict:
     """The measures of one harmonically driven run (module docstring) at granule `measured`."""
-    from .analysis.narrowband import drive_of, harmonic_amplitudes, response_period, steady_window
+    from ..analysis.narrowband import drive_of, harmonic_amplitudes, response_period, steady_window
 
     sc = tomllib.loads(ds.attrs["scenario"])
     drive = drive_of(ds)
@@ -256,7 +256,7 @@ def plot_spectrum(ds: xr.Dataset, output):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import save
+    from ..viz.plots import save
 
     sub, rest = _curves(ds)
     f = sub["frequency"].values / 1e3
@@ -358,9 +358,9 @@ def write_spectrum(summary: xr.Dataset, spec: SpectrumSpec, path) -> xr.Dataset:
     `spectrum_dataset`), its figure (.png) and its report (.md). Returns the Dataset."""
     from pathlib import Path
 
-    from .guard.owners import text_mark
-    from .guard.writing import write_text
-    from .results import write_netcdf
+    from ..guard.owners import text_mark
+    from ..guard.writing import write_text
+    from ..io.results import write_netcdf
 
     path = Path(path)
     ds = spectrum_dataset(summary, spec)

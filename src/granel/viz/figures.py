@@ -14,8 +14,8 @@ from matplotlib.collections import PatchCollection  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from .analysis.modal import accumulated_modal_energy, modal_coordinates, modal_energies, time_averaged_accumulation  # noqa: E402
-from .analysis.reciprocity import directed_velocity, excitation_of  # noqa: E402
+from ..analysis.modal import accumulated_modal_energy, modal_coordinates, modal_energies, time_averaged_accumulation  # noqa: E402
+from ..analysis.reciprocity import directed_velocity, excitation_of  # noqa: E402
 
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
 
@@ -24,7 +24,7 @@ SIDE_NAME = {"LSGM:3": "shock on LSGM granule 3", "SSGM:C": "shock on SSGM granu
 
 def save_both(fig, path) -> list[Path]:
     """Write `path` as PNG and PDF (same stem)."""
-    from .guard.writing import save_figure
+    from ..guard.writing import save_figure
 
     path = Path(path)
     outs = []
@@ -42,7 +42,7 @@ def scenario_of(ds) -> dict:
 
 def model_of(ds):
     """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
-    from .run import built_from_result
+    from ..run import built_from_result
 
     return built_from_result(ds)
 
@@ -56,7 +56,7 @@ def modal_energy_history(ds, modes=None):
 
 def solid_state_at(ds, time: float, modes=None):
     """The solid's reduced (q, v) at the stored solid time closest to `time`, and its index."""
-    from .analysis.solid import nearest_solid_outputs, reduced_states
+    from ..analysis.solid import nearest_solid_outputs, reduced_states
 
     q, v = reduced_states(ds, [time], model_of(ds)[2], modes)
     return q[0], v[0], int(nearest_solid_outputs(ds, [time])[0])
@@ -66,8 +66,8 @@ def fig3_velocities(fwd, bwd, out, window=(4e-4, 8e-4)):
     """Fig. 3: (a) the shock; (b) v_3C (granule 3 when C is shocked) and v_C3; (c) their amplitude
     spectra over `window` (the text's "lower frequency content for v_3C ... especially for
     tau > 0.6 ms"), with the dominant frequencies marked."""
-    from .analysis.signals import amplitude_spectrum, spectrum_peak
-    from .excitation import SHOCK_LEVELS
+    from ..analysis.signals import amplitude_spectrum, spectrum_peak
+    from ..granular.loads import SHOCK_LEVELS
 
     A, dA = excitation_of(fwd)
     B, dB = excitation_of(bwd)
@@ -166,7 +166,7 @@ def _fig4_inset(ax, runs, color, tmax=0.2):
 def granule_energies_at(ds, k: int, su=None):
     """Per-granule energy (kinetic + rotational + contact share) at output index k, with the
     solid contact points displaced by su (nc, 2): `analysis.density.granule_energies` for one frame."""
-    from .analysis.density import granule_energies, granule_states
+    from ..analysis.density import granule_energies, granule_states
 
     system = model_of(ds)[1]
     return granule_energies(system, granule_states(ds, [k]), None if su is None else su[None])[0], system
@@ -174,7 +174,7 @@ def granule_energies_at(ds, k: int, su=None):
 
 def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=None):
     """Granules and the solid coloured by the normalised energy density (14) at `time`."""
-    from .analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+    from ..analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
     from .plots import draw_plate
 
     sc, system, model = model_of(ds)

@@ -30,9 +30,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .analysis.density import granule_energies, granule_states  # noqa: E402
+from ..analysis.density import granule_energies, granule_states  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
-from .results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
+from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
 
 # the paper's magnification of the deformation movies (Appendix C)
 MAGNIFICATION = {"weak": 5000.0, "moderate": 1000.0, "strong": 200.0}
@@ -86,15 +86,15 @@ RESULT_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
 
 def read_result(path) -> "xr.Dataset":
     """A run's result file, read and checked (`run.load_result`); ResultFileError naming the file."""
-    from .run import load_result
+    from ..run import load_result
 
     return load_result(path)
 
 
 def check_result(ds, name="result") -> None:
     """ResultFileError unless `ds` is a granel result that fits the scenario it carries."""
-    from .results import check_result_schema
-    from .run import check_result_model
+    from ..io.results import check_result_schema
+    from ..run import check_result_model
 
     check_result_schema(ds, name)
     check_result_model(ds, name)
@@ -115,7 +115,7 @@ _MODES_CACHE: dict = {}
 def _modes_of(ds, model):
     """All modes of the solid (cached per process for the last scenario seen: the deformation and
     energy-density movies of one run share them)."""
-    from .solid.modal import all_modes
+    from ..solid.modal import all_modes
 
     key = ds.attrs["scenario"]
     if key not in _MODES_CACHE:
@@ -127,7 +127,7 @@ def _modes_of(ds, model):
 def solid_states(ds, times: np.ndarray, modes=None) -> tuple[np.ndarray, np.ndarray]:
     """The solid's reduced (q, v), shape (len(times), ndof) each, at the stored solid times
     nearest to `times` (`analysis.solid.reduced_states`, modes cached per process)."""
-    from .analysis.solid import reduced_states
+    from ..analysis.solid import reduced_states
     from .figures import model_of
 
     model = model_of(ds)[2]
@@ -214,7 +214,7 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
         return plan
 
     # energy density, eq. (14): w / w0 with w0 the excited granule's peak kinetic energy density
-    from .analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+    from ..analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
 
     w0 = excited_reference(ds)
     SU = None
@@ -374,8 +374,8 @@ def iter_frames(plan: FramePlan) -> Iterator[np.ndarray]:
 
 
 def _movie_mark() -> str:
-    from . import __version__
-    from .guard.owners import MARK
+    from .. import __version__
+    from ..guard.owners import MARK
 
     return f"{MARK} {__version__}"
 
@@ -435,9 +435,9 @@ def write_movie(frames: Callable[[], Iterator[np.ndarray]] | Sequence[np.ndarray
     not write."""
     import imageio.v2 as imageio
 
-    from .guard.exits import FileError, is_no_space
-    from .guard.owners import is_granel_file
-    from .guard.writing import atomic_path
+    from ..guard.exits import FileError, is_no_space
+    from ..guard.owners import is_granel_file
+    from ..guard.writing import atomic_path
 
     make = frames if callable(frames) else (lambda: iter(frames))
     out = Path(out)
@@ -462,7 +462,7 @@ def write_movie(frames: Callable[[], Iterator[np.ndarray]] | Sequence[np.ndarray
             out = gif
     import io
 
-    from .guard.writing import write_bytes
+    from ..guard.writing import write_bytes
 
     buffer = io.BytesIO()  # encoded in memory: the disk sees one plain, atomic write
     with imageio.get_writer(buffer, format="GIF", mode="I", duration=1000.0 / fps, loop=0,
@@ -601,7 +601,7 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
-        from .guard.signals import pool_initializer
+        from ..guard.signals import pool_initializer
 
         with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=mp.get_context("spawn"),
                                  initializer=pool_initializer) as ex:

@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .guard.writing import fsync_path, staging_folder
+from ..guard.writing import fsync_path, staging_folder
 
 FORMATS = ("vtk", "xdmf", "csv", "extxyz")
 EXTXYZ_PROPERTIES = "species:S:1:pos:R:3:radius:R:1:velo:R:3:omega:R:1"
@@ -97,8 +97,8 @@ def parse_formats(values: Iterable[str] | None) -> list[str]:
 def read_export_result(path) -> "xr.Dataset":
     """A run's result, checked (`run.load_result`); ExportError naming the file, with the
     reader's code (4: not readable as NetCDF, 2: not a result or damaged)."""
-    from .results import ResultFileError
-    from .run import load_result
+    from ..io.results import ResultFileError
+    from ..run import load_result
 
     try:
         return load_result(path)
@@ -142,7 +142,7 @@ def solid_cells(model) -> list[tuple[str, np.ndarray]]:
 
 def elastic_constants(sc) -> tuple[float, float]:
     """(Young's modulus E [Pa], Poisson ratio nu) of the material of scenario `sc`'s solid."""
-    from .scenario.build import present_solid
+    from ..scenario.build import present_solid
 
     mat = sc.materials[present_solid(sc).material]
     return float(mat.E), float(mat.nu)
@@ -155,7 +155,7 @@ def plate_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndar
     own plane-stress law (`solid.plate.plane_stress_law`, eq. 7)."""
     from skfem.helpers import sym_grad
 
-    from .solid.plate import plane_stress_law
+    from ..solid.plate import plane_stress_law
 
     basis = model.basis
     S = plane_stress_law(E, nu)(sym_grad(basis.interpolate(np.asarray(x, float))))  # (2, 2, ne, nqp)
@@ -198,7 +198,7 @@ def solid_frames(ds, model, elastic: tuple[float, float]
     """(time, nodal displacement (nn, 3), nodal velocity (nn, 3), cell data) at each stored solid
     output; the cell data: element energy density (ne,) and the stress (`solid_stress`) with
     elastic = (E, nu)."""
-    from .analysis.density import solid_energy_density
+    from ..analysis.density import solid_energy_density
     from .animate import solid_states
 
     ts = ds["solid_time"].values.astype(float)
@@ -403,7 +403,7 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sc, system, model = model_of(ds)
-    from .guard.resources import check_disk
+    from ..guard.resources import check_disk
 
     check_disk(export_size(ds, model, formats), out, f"the export to {out}")
     elastic = elastic_constants(sc) if has_solid(ds, model) else (0.0, 0.0)

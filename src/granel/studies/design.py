@@ -67,7 +67,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from . import scenario as S
+from .. import scenario as S
 from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, case_metric_names, check_base
 
 # a trial's reason when the study stopped while it ran
@@ -435,7 +435,7 @@ def _timed_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_ru
 def load_design(path) -> tuple[DesignSpec, Path]:
     """A design file -> (DesignSpec, its folder); DesignFileError names the file and the field
     (or the line), with the reader's exit code (`guard.reading`)."""
-    from .guard.reading import InputFileError, read_toml
+    from ..guard.reading import InputFileError, read_toml
 
     path = Path(path)
     try:
@@ -543,7 +543,7 @@ def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | Non
     """The runs of a trial with these overrides, as the solver would receive them short of the
     solid: [(scenario, its granular system, fingerprint of the system, its initial state and the
     resolved [simulation] table)], or None when the design is invalid there."""
-    from .scenario.build import build_granular
+    from ..scenario.build import build_granular
     from .sweep import case_scenarios
 
     ov = dict(overrides)
@@ -564,7 +564,7 @@ def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | Non
 
 def _solid_digests(runs: list) -> list[str] | None:
     """The fingerprints of the runs' solid models (`build_solid`), or None if one cannot be built."""
-    from .scenario.build import build_solid
+    from ..scenario.build import build_solid
 
     try:
         return [_digest(build_solid(sc, system)) for sc, system, _ in runs]
@@ -709,7 +709,7 @@ def design_inputs(spec: DesignSpec, base_dir: Path) -> dict[str, str]:
     its file) and every granule or load table it names (`sweep.sweep_inputs`)."""
     from importlib import resources
 
-    from .guard.fingerprints import file_digest, text_digest
+    from ..guard.fingerprints import file_digest, text_digest
     from .sweep import sweep_inputs
 
     out = {}
@@ -742,7 +742,7 @@ def open_study(spec: DesignSpec, out: Path, base_dir: Path | None = None):
         raise DesignFileError(f"-o {out}: it holds a study of another design ({said}); write this one to another "
                               "folder, or restore those fields")
     if base_dir is not None:
-        from .guard.fingerprints import changed
+        from ..guard.fingerprints import changed
 
         now, before = design_inputs(spec, base_dir), study.user_attrs.get("inputs")
         moved = changed(before, now) if isinstance(before, dict) else []
@@ -887,7 +887,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     "warnings"} (`design_warnings`)."""
     from dask.distributed import Client, as_completed
 
-    from .guard.signals import local_cluster
+    from ..guard.signals import local_cluster
 
     from .sweep import _connect
 
@@ -1074,7 +1074,7 @@ def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenari
 
 
 def _write_text(path: Path, text: str) -> None:
-    from .guard.writing import write_text
+    from ..guard.writing import write_text
 
     write_text(path, text)
 
@@ -1087,7 +1087,7 @@ def write_outputs(spec: DesignSpec, base_dir: Path, study, out: Path) -> dict:
     (one objective) or pareto/NN.toml (several): each a scenario that `granel run` takes as it
     is, headed by its trial and objective values. Stale pareto/NN.toml
     files of this study (headed as granel design writes them) are removed; no other file is."""
-    from .results import write_netcdf
+    from ..io.results import write_netcdf
 
     ds = trials_dataset(spec, study)
     write_netcdf(ds, out / "trials.nc")

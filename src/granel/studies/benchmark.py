@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import CASES, case_scenario, case_tag
+from .paper import CASES, case_scenario, case_tag
 
 # the three methods on the one core: the paper's algorithm, the fast method with its default
 # exact integrator, and with modal Newmark at dtau0
@@ -39,7 +39,7 @@ def energy_deviation_pct(a, b) -> float:
 def velocity_rel_l2(a, b, tmax=4e-4) -> float:
     """Relative L2 difference of the measured granule's velocity over the first 0.4 ms. The
     measured granule is the one opposite the excited one (3 <-> C), as in Fig. 3."""
-    from .analysis.reciprocity import directed_velocity, excitation_of, toward_solid
+    from ..analysis.reciprocity import directed_velocity, excitation_of, toward_solid
     import tomllib
 
     label, _ = excitation_of(a)
@@ -57,7 +57,7 @@ def errors(ds, ref) -> dict:
     """A run against a reference of the same case: the largest energy difference (LSGM, SSGM,
     solid) over the input, the relative L2 difference of the excited granule's velocity and of the
     measured one in the other medium (3 <-> C) over the whole run, and the run's balance (13)."""
-    from .analysis.reciprocity import directed_velocity, excitation_of
+    from ..analysis.reciprocity import directed_velocity, excitation_of
 
     w = float(ref["input_work"].values.max())
     out = {"energy": max(float(np.abs(ds[k].values - ref[k].values).max()) / w
@@ -85,7 +85,7 @@ def fresh_run_seconds(case, duration: str | None = None) -> float:
 
 
 def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True, log=print) -> dict:
-    from .run import run_scenario
+    from ..run import run_scenario
 
     dur = duration or ("0.1ms" if quick else "0.8ms")
     out = {"duration": dur, "cases": []}
@@ -131,7 +131,7 @@ def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True
             f"{out['fresh_short_run_s']:.2f} s")
     out["paper_study_s"] = None
     if not quick:
-        from .report import paper_study
+        from .paper import paper_study
 
         with tempfile.TemporaryDirectory() as d:
             t0 = time.perf_counter()

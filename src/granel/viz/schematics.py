@@ -82,13 +82,13 @@ def with_solid_kind(sc, kind: str):
 
 
 def _system(sc):
-    from .run import built_models
+    from ..run import built_models
 
     return built_models(with_solid_kind(sc, "rigid"))[0]
 
 
 def _solid_model(sc, system, kind: str):
-    from .run import built_models
+    from ..run import built_models
 
     return built_models(with_solid_kind(sc, kind))[1]
 

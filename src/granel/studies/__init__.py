@@ -1,0 +1,3 @@
+"""Applications built on runs: sweeps and their modes (run, reciprocity, spectrum), design
+searches and their reports, the paper's study and its statements, benchmarks.
+May import: viz, analysis, run, scenario, problem, coupling, solid, granular, io, guard."""
