@@ -110,7 +110,7 @@ def _one_map(solver, F, level, derivatives=False):
     pred = core.Prediction(st.u.copy(), st.v.copy(), st.a.copy(), np.empty(2 * nc))
     core.modal_predictor(st, solid, cache.D[level], h, np.empty(len(solid.w2)), pred.a_pred)
     w = core.iter_work(st.y, nc)
-    assert core.interface_map(st.y, st.clock[0], h, solver.stepper.model, pred, cache.C[level], F, 0.0, w, derivatives)
+    assert core.interface_map(st.y, st.clock[0]["t"], h, solver.stepper.model, pred, cache.C[level], F, 0.0, w, derivatives)
     return w.iface.F.copy(), w, h
 
 
@@ -121,7 +121,7 @@ def test_interface_forces_jacobian_matches_finite_differences(mid_run):
     from granel.granular.bundles import interface_buffers
 
     solver = mid_run
-    _, w, _ = _one_map(solver, solver.st.F.copy(), int(solver.st.ticks[1]), derivatives=True)
+    _, w, _ = _one_map(solver, solver.st.F.copy(), int(solver.st.clock[0]["level"]), derivatives=True)
     y, u, v = w.ytr, w.u1.copy(), w.v1.copy()
     active = np.flatnonzero(w.iface.normal > 0)
     assert len(active) >= 4
@@ -148,7 +148,7 @@ def test_friction_eigenvalue_a9_matches_the_fixed_point_map(mid_run):
     derivative is -|lambda|: the friction iteration oscillates about its fixed point."""
     solver = mid_run
     st = solver.st
-    level = int(st.ticks[1])
+    level = int(st.clock[0]["level"])
     F0 = st.F.copy()
     G0, w, h = _one_map(solver, F0, level)
     normal, vrel = w.iface.normal.copy(), w.iface.vrel.copy()

@@ -163,6 +163,54 @@ def test_coupled_resume(tmp_path, solver):
     assert resumed.sizes["step"] == full.sizes["step"]
 
 
+_OLD_CLOCK = ("t", "t_start", "ledger_ms", "friction_rate", "ledger", "ledger_start", "level", "work_max")
+
+
+def _as_old_layout(path):
+    """Rewrite a checkpoint into the layout written before the solvers' states had named
+    records. The exact integrator's: the clock as 8 floats and 2 integers (`meta`), the last
+    step's arrays among the state's (`st:y0`, ...). The Newmark loop's: the clock as [t] and
+    [ticks, level, forced level]."""
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    if "state:clock" in arrays:
+        clock = arrays.pop("state:clock")[0]
+        arrays["state:st:clock"] = np.array([clock[k] for k in _OLD_CLOCK], float)
+        arrays["state:st:meta"] = np.array([clock["grid_level"], clock["rejected"]], np.int64)
+        for k in [k for k in arrays if k.startswith("state:last:")]:
+            arrays["state:st:" + k[len("state:last:"):]] = arrays.pop(k)
+    else:
+        clock = arrays.pop("state:st:clock")[0]
+        arrays["state:st:clock"] = np.array([clock["t"]], float)
+        arrays["state:st:ticks"] = np.array([clock["ticks"], clock["level"], clock["forced"]], np.int64)
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+@pytest.mark.parametrize("solver", ["fast", "paper"])
+def test_a_checkpoint_of_the_old_layout_resumes(tmp_path, solver):
+    """Checkpoints written before the solvers' states had named records still resume, to the
+    uninterrupted run bit for bit."""
+    sc = paper("beam", "SSGM:C", "strong", f'simulation.solver="{solver}"', 'simulation.duration="0.06ms"',
+               'simulation.checkpoint_every="0.02ms"')
+    full = run_scenario(sc)
+    ck = tmp_path / "c.ckpt"
+
+    def killer(t):
+        if t > 0.045e-3:
+            raise Killed
+
+    with pytest.raises(Killed):
+        run_scenario(sc, killer, ck)
+    _as_old_layout(ck)
+    with np.load(ck) as z:
+        assert z["state:st:clock"].dtype == float and "state:clock" not in z.files
+    resumed = run_scenario(sc, None, ck, ck)
+    for v in ("v_x", "energy_solid", "balance_error", "contact_force_normal"):
+        assert np.array_equal(resumed[v].values, full[v].values), v
+    assert resumed.sizes["step"] == full.sizes["step"]
+
+
 def test_sparse_newton_path_matches_the_modal_path():
     """Solids too large for all modes use sparse Newmark with the same Newton coupling: the same
     discrete equations as modal Newmark, so the two differ by round-off: each step's solve with

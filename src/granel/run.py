@@ -34,7 +34,7 @@ def make_solver(problem: Problem, sparse: bool | None = None):
     solid, per, settings = problem.solid, problem.schedule.per, problem.settings
     large = sparse if sparse is not None else solid.ndof > DENSE_LIMIT
     if settings.method == "fast" and settings.integrator == "exact" and not sparse:
-        from .coupling.solver import ExactSolver
+        from .coupling.exact.solver import ExactSolver
 
         v_ref, e_ref = reference_scales(problem)
         auto = settings.mode_cutoff == "auto"

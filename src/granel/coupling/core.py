@@ -82,11 +82,37 @@ class StepCache(NamedTuple):
     ct: np.ndarray  # (H+1, nc)
 
 
+# the clock of the Newmark step loop (one record: st.clock[0].t, ...)
+STEP_CLOCK = np.dtype([
+    ("t", np.float64),  # the current time
+    ("ticks", np.int64),  # ... in ticks of dt0 / 2^H, so that steps land exactly on the outputs
+    ("level", np.int64),  # the halving level of the last accepted step
+    ("forced", np.int64),  # the smallest level allowed (raised after a failed step)
+])
+
+
+def new_clock() -> np.ndarray:
+    return np.zeros(1, STEP_CLOCK)
+
+
+def upgraded_state(arrays: dict) -> dict:
+    """A checkpoint's `CoupledState` arrays in today's layout: one written before the clock was a
+    record ([t] and [ticks, level, forced level]) is translated; the values are the same."""
+    if "st:ticks" not in arrays:
+        return arrays
+    out = {k: v for k, v in arrays.items() if k not in ("st:clock", "st:ticks")}
+    clock = new_clock()
+    ticks = np.asarray(arrays["st:ticks"], np.int64)
+    clock[0]["t"] = float(np.asarray(arrays["st:clock"], float)[0])
+    clock[0]["ticks"], clock[0]["level"], clock[0]["forced"] = int(ticks[0]), int(ticks[1]), int(ticks[2])
+    out["st:clock"] = clock
+    return out
+
+
 class CoupledState(NamedTuple):
     """Everything that evolves: the granular state y, the modal state (eta, eta', eta''), the
     interface forces F on the solid (nc, 2), the contacts' motion (u, v, a flat, 2nc), |N| and the
-    relative tangential velocity at the last accepted step, the clock [t] and
-    [ticks, level, forced level]."""
+    relative tangential velocity at the last accepted step, and the clock (a STEP_CLOCK record)."""
 
     y: np.ndarray
     eta: np.ndarray
@@ -98,8 +124,7 @@ class CoupledState(NamedTuple):
     a: np.ndarray
     normal: np.ndarray
     vrel: np.ndarray
-    clock: np.ndarray  # float64 (1,)
-    ticks: np.ndarray  # int64 (3,)
+    clock: np.ndarray
 
 
 class StepLog(NamedTuple):
@@ -372,7 +397,8 @@ def step_level(st, law, cache, solid, cfg, ticks_to_output, lam):
     it, never past the next output. Fills `lam` at the chosen step. Returns -1 if (B1) cannot be
     met within the allowed halvings."""
     H = cfg.halvings
-    n = st.ticks[2]
+    clock = st.clock[0]
+    n = clock.forced
     if cfg.policy == POLICY_B1:
         while True:
             ensure_level(cache, solid, cfg.dt0, n)
@@ -381,7 +407,7 @@ def step_level(st, law, cache, solid, cfg, ticks_to_output, lam):
             if n == H:
                 return -1
             n += 1
-    while n < H and (st.ticks[0] % 2 ** (H - n) != 0 or 2 ** (H - n) > ticks_to_output):
+    while n < H and (clock.ticks % 2 ** (H - n) != 0 or 2 ** (H - n) > ticks_to_output):
         n += 1
     ensure_level(cache, solid, cfg.dt0, n)
     eigenvalues_at(st, law, cache.ct[n], cfg.dt0 / 2.0**n, lam)
@@ -451,20 +477,21 @@ def advance_modal(st, model, ref_pos, solid, cache, cfg, target, log):
     pred = Prediction(st.u, st.v, st.a, np.empty(2 * nc))
     lam = np.empty(nc)
     lim2 = cfg.max_disp * cfg.max_disp
+    clock = st.clock[0]
     k = 0
-    while st.ticks[0] < target:
+    while clock.ticks < target:
         if k >= log.t.shape[0]:
             return LOG_FULL, k
-        level = step_level(st, model.law, cache, solid, cfg, target - st.ticks[0], lam)
+        level = step_level(st, model.law, cache, solid, cfg, target - clock.ticks, lam)
         if level < 0:
             return NO_CONVERGENCE, k
         h = cfg.dt0 / 2.0**level
         D = cache.D[level]
         modal_predictor(st, solid, D, h, dvec, pred.a_pred)
-        status, its = interface_solve(st.y, st.clock[0], h, model, pred, cache.C[level], st.F, cfg, solid.frame, w)
+        status, its = interface_solve(st.y, clock.t, h, model, pred, cache.C[level], st.F, cfg, solid.frame, w)
         if status != CONVERGED:
-            if cfg.retry and st.ticks[2] < H:
-                st.ticks[2] += 1  # retry at half the step (the state is untouched)
+            if cfg.retry and clock.forced < H:
+                clock.forced += 1  # retry at half the step (the state is untouched)
                 continue
             return NO_CONVERGENCE if status == NO_CONVERGENCE else NON_FINITE, k
         for r in range(2 * nc):
@@ -474,10 +501,10 @@ def advance_modal(st, model, ref_pos, solid, cache, cfg, target, log):
         st.y[:] = w.ytr
         st.normal[:] = w.iface.normal
         st.vrel[:] = w.iface.vrel
-        st.clock[0] += h
-        st.ticks[0] += 2 ** (H - level)
-        st.ticks[1] = level
-        log.t[k] = st.clock[0]
+        clock.t += h
+        clock.ticks += 2 ** (H - level)
+        clock.level = level
+        log.t[k] = clock.t
         log.h[k] = h
         log.iterations[k] = its
         log.lam[k, :] = lam
@@ -490,5 +517,6 @@ def advance_modal(st, model, ref_pos, solid, cache, cfg, target, log):
 @njit(cache=True)
 def iter_work(y, nc):
     """Scratch arrays of `interface_solve` for nc contacts and a state like y."""
-    return IterWork(np.empty_like(y), np.empty((5, y.shape[0])), motion_buffers(nc), np.zeros((nc, 2)), np.zeros((nc, 2)),
-                    np.zeros(2 * nc), np.zeros((nc, 2)), np.zeros((2 * nc, 2 * nc)), np.zeros(2 * nc), interface_buffers(nc))
+    return IterWork(ytr=np.empty_like(y), rk4=np.empty((5, y.shape[0])), motion=motion_buffers(nc), u1=np.zeros((nc, 2)),
+                    v1=np.zeros((nc, 2)), a1=np.zeros(2 * nc), F_start=np.zeros((nc, 2)), J=np.zeros((2 * nc, 2 * nc)),
+                    r=np.zeros(2 * nc), iface=interface_buffers(nc))

@@ -2,7 +2,7 @@
 
 A solver (`coupling.solver.ModalSolver`, `coupling.sparse.SparseSolver`) offers `start()`,
 `advance(k, trajectory)` to output k, `observe()`, `solid_snapshot()`, `save()`/`load(arrays)`
-and `attributes()`; one that computes its outputs in blocks (`coupling.solver.ExactSolver`) also
+and `attributes()`; one that computes its outputs in blocks (`coupling.exact.solver.ExactSolver`) also
 offers `advance_block(k, trajectory)`, which returns the outputs from k on that it reached as
 arrays (first axis: the output), and `solid_block(rows)`. The driver never sees the physics
 inside.

@@ -84,8 +84,9 @@ class SparseSolver:
         self.sol = self.newmark.initial(x0, None, BtF if x0 is not None else None)
         z = np.zeros(nc)
         # the policy reads normal, vrel and ticks from a CoupledState (modal parts empty)
-        self.st = core.CoupledState(self.y0.copy(), np.zeros(0), np.zeros(0), np.zeros(0), F0.copy(), self.B @ self.sol.x,
-                                    np.zeros(2 * nc), np.zeros(2 * nc), z, z.copy(), np.zeros(1), np.zeros(3, np.int64))
+        self.st = core.CoupledState(y=self.y0.copy(), eta=np.zeros(0), etad=np.zeros(0), etaa=np.zeros(0), F=F0.copy(),
+                                    u=self.B @ self.sol.x, v=np.zeros(2 * nc), a=np.zeros(2 * nc), normal=z, vrel=z.copy(),
+                                    clock=core.new_clock())
 
     def save(self) -> dict:
         out = {f"st:{k}": np.asarray(v) for k, v in self.st._asdict().items()}
@@ -93,27 +94,29 @@ class SparseSolver:
         return out
 
     def load(self, arrays: dict) -> None:
-        self.st = core.CoupledState(*[np.array(arrays[f"st:{k}"]) for k in core.CoupledState._fields])
+        arrays = core.upgraded_state(arrays)
+        self.st = core.CoupledState(**{k: np.array(arrays[f"st:{k}"]) for k in core.CoupledState._fields})
         self.sol = NewmarkState(np.array(arrays["sx"]), np.array(arrays["sv"]), np.array(arrays["sa"]), self.t)
         self.stepper.refresh(arrays["ref_pos"])
 
     @property
     def t(self) -> float:
-        return float(self.st.clock[0])
+        return float(self.st.clock[0]["t"])
 
     # ------------------------------------------------------------ stepping
     def advance(self, k: int, trajectory) -> None:
         st, s = self.st, self.settings
         H = s.halvings
-        st.ticks[2] = 0
+        clock = st.clock[0]
+        clock["forced"] = 0
         target = k * self.per_ticks
         lam = np.zeros(len(self.frame.tangent))
         cache = self._cache(H + 1 if s.method == "paper" else 1)
         no_modes = core.ModalSolid(np.zeros(0), np.zeros((0, 0)), self.frame)  # the policy reads only the frame and cache
-        while st.ticks[0] < target:
-            if not cache.ready[st.ticks[2]]:
-                cache = self._cache(int(st.ticks[2]) + 1)
-            level = core.step_level(st, self.stepper.model.law, cache, no_modes, self.cfg, target - st.ticks[0], lam)
+        while clock["ticks"] < target:
+            if not cache.ready[clock["forced"]]:
+                cache = self._cache(int(clock["forced"]) + 1)
+            level = core.step_level(st, self.stepper.model.law, cache, no_modes, self.cfg, target - int(clock["ticks"]), lam)
             if level < 0:
                 raise SolverError(f"t = {self.t:.6e} s: (B1) needs more than {H} halvings of {s.dt:.3e} s")
             ops = self.operators(level)
@@ -121,8 +124,8 @@ class SparseSolver:
             pred = core.Prediction(self.B @ self.sol.x, self.B @ self.sol.v, self.B @ self.sol.a, self.B @ a_pred)
             status, its = core.interface_solve(st.y, self.t, ops.h, self.stepper.model, pred, ops.C, st.F, self.cfg, self.frame, self.work)
             if status != core.CONVERGED:
-                if self.cfg.retry and st.ticks[2] < H:
-                    st.ticks[2] += 1
+                if self.cfg.retry and clock["forced"] < H:
+                    clock["forced"] += 1
                     continue
                 raise SolverError(f"t = {self.t:.6e} s: the interface forces did not converge at dt = {ops.h:.3e} s; reduce "
                                   "simulation.dt, raise simulation.max_halvings or simulation.max_iterations, or lower k_s")
@@ -130,9 +133,9 @@ class SparseSolver:
             st.y[:] = self.work.ytr
             st.normal[:] = self.work.iface.normal
             st.vrel[:] = self.work.iface.vrel
-            st.clock[0] += ops.h
-            st.ticks[0] += 2 ** (H - level)
-            st.ticks[1] = level
+            clock["t"] += ops.h
+            clock["ticks"] += 2 ** (H - level)
+            clock["level"] = level
             trajectory.log_steps([self.t], [ops.h], [its], lam[None, :])
             self.stepper.maybe_refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
 

@@ -27,7 +27,7 @@ SOLID_FIELDS = {
     "rigid": {"kind", "x0", "y0", "width", "length"},
     "none": {"kind"},
 }
-# the fast method's exact integrator alone reads these (`coupling.solver.ExactSolver`)
+# the fast method's exact integrator alone reads these (`coupling.exact.solver.ExactSolver`)
 EXACT_ONLY = {"integrator", "force_model", "adaptive", "rtol", "atol", "ledger_tol", "max_step", "mode_cutoff"}
 
 
