@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from granel import scenario as S
-from granel.coupling.solver import SolverError
+from granel.coupling.protocol import SolverError
 from granel.run import run_problem, run_scenario
 from granel.solid.beam import build_beam
 
@@ -209,6 +209,38 @@ def test_a_checkpoint_of_the_old_layout_resumes(tmp_path, solver):
     for v in ("v_x", "energy_solid", "balance_error", "contact_force_normal"):
         assert np.array_equal(resumed[v].values, full[v].values), v
     assert resumed.sizes["step"] == full.sizes["step"]
+
+
+def test_a_checkpoint_changed_anywhere_is_refused(tmp_path):
+    """A checkpoint carries the digest of its bytes: a byte changed even where the archive reader
+    does not look (a member's local header: its time stamp, CRC and sizes are read from the
+    central directory) is refused as corrupt, and the untouched file resumes."""
+    import zipfile
+
+    from granel.io.checkpoint import CheckpointError, load_checkpoint
+
+    sc = paper("rigid", "LSGM:3", "strong", 'simulation.duration="0.01ms"', 'simulation.checkpoint_every="0.002ms"')
+    ck = tmp_path / "c.ckpt"
+
+    def killer(t):
+        if t > 0.0045e-3:
+            raise Killed
+
+    with pytest.raises(Killed):
+        run_scenario(sc, killer, ck)
+    good = ck.read_bytes()
+    with zipfile.ZipFile(ck) as z:
+        at = z.infolist()[3].header_offset + 10  # the member's modification time
+    bad = bytearray(good)
+    bad[at] ^= 0xFF
+    ck.write_bytes(bytes(bad))
+    with zipfile.ZipFile(ck) as z:  # the archive reader itself sees nothing wrong
+        assert z.testzip() is None
+    with pytest.raises(CheckpointError, match="corrupt"):  # before the fingerprint is compared
+        load_checkpoint(ck, "any")
+    ck.write_bytes(good)
+    resumed = run_scenario(sc, None, ck, ck)
+    assert np.array_equal(resumed["v_x"].values, run_scenario(sc)["v_x"].values)
 
 
 def test_sparse_newton_path_matches_the_modal_path():

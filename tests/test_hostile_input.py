@@ -219,20 +219,34 @@ def test_a_fast_initial_velocity_within_hertz_runs_and_keeps_the_balance():
 
 
 def test_the_guards_stop_a_run_that_leaves_the_physics():
-    """The driver's checks on one output: a contact overlapping beyond the limit, a balance lost,
-    a non-finite state; a healthy output passes with its balance measured from the start."""
-    from granel.coupling.driver import Guards, PhysicsStop, _guarded
+    """The driver's checks on a block of outputs: a contact overlapping beyond the limit, a balance
+    lost, a non-finite state, each reported at the first output that breaks it with its own time;
+    healthy outputs pass, their balance measured from the start."""
+    from granel.coupling.driver import Guards, PhysicsStop, check_guards
+    from granel.coupling.observation import Observation
 
-    obs = {"pos": np.zeros((2, 2)), "vel": np.zeros((2, 2)), "energy_media": np.array([1.0, 0.0]), "energy_solid": 0.5,
-           "dissipated_viscous": 0.2, "dissipated_friction": 0.1, "input_work": 1.0, "balance_error": 0.8,
-           "overlap_ratio": 0.02, "overlap_at": "granules A:1 and A:2"}
-    assert _guarded(obs, 0.8, 0.0, Guards(), 1e-6)["balance_error"] == 0.0
-    with pytest.raises(PhysicsStop, match="A:1 and A:2"):
-        _guarded({**obs, "overlap_ratio": 0.5}, 0.8, 0.0, Guards(), 1e-6)
-    with pytest.raises(PhysicsStop, match="energy balance"):
-        _guarded({**obs, "balance_error": 0.9}, 0.8, 0.0, Guards(balance_limit=0.05), 1e-6)
+    def block(**bad):
+        """Two outputs (t = 1 and 2 us); `bad` replaces the second one's values."""
+        two = lambda v: np.array([v, bad.get("_", v)], float)  # noqa: E731
+        values = {"pos": np.zeros((2, 2, 2)), "vel": np.zeros((2, 2, 2)), "ledger": two(0.8), "input_work": two(1.0),
+                  "overlap_ratio": two(0.02)}
+        for k, v in bad.items():
+            if k != "_":
+                values[k][1] = v
+        return Observation(times=np.array([1e-6, 2e-6]), theta=np.zeros((2, 2)), omega=np.zeros((2, 2)),
+                           energy_media=np.array([[1.0, 0.0]] * 2), energy_solid=two(0.5),
+                           energy_solid_kinetic=two(0.5), energy_solid_potential=two(0.0), dissipated_viscous=two(0.2),
+                           dissipated_friction=two(0.1), force_normal=np.zeros((2, 0)), force_tangential=np.zeros((2, 0)),
+                           wall_force=np.zeros((2, 0, 2)), overlap_at=["granules A:1 and A:2"] * 2, **values)
+
+    check_guards(block(), 0.8, 0.0, Guards())
+    assert block().recorded(0.8)["balance_error"].tolist() == [0.0, 0.0]
+    with pytest.raises(PhysicsStop, match=r"t = 2\.000000e-06 s: granules A:1 and A:2 overlap by 50\.0%"):
+        check_guards(block(overlap_ratio=0.5), 0.8, 0.0, Guards())
+    with pytest.raises(PhysicsStop, match=r"t = 2\.000000e-06 s: the energy balance \(13\) is off by 1\.00e-01"):
+        check_guards(block(ledger=0.9), 0.8, 0.0, Guards(balance_limit=0.05))
     with pytest.raises(PhysicsStop, match="not finite"):
-        _guarded({**obs, "vel": np.array([[np.nan, 0.0]])}, 0.8, 0.0, Guards(), 1e-6)
+        check_guards(block(vel=np.array([[np.nan, 0.0], [0.0, 0.0]])), 0.8, 0.0, Guards())
 
 
 def test_the_balance_excludes_the_initial_energy():

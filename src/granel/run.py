@@ -10,94 +10,43 @@ from __future__ import annotations
 import functools
 import tomllib
 from pathlib import Path
-from dataclasses import replace
 
 import numpy as np
 
 from . import scenario as S
 from .io.checkpoint import fingerprint
 from .coupling.driver import drive
-from .granular.system import load_scales
 from .problem import Problem
 from .io.results import base_attrs, trajectory_spec
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
-    """The solver for a problem. The fast method's exact integrator: the modes below its cut-off
-    (for solids beyond `solid.modal.DENSE_LIMIT` DOFs, only those are computed) and residual
-    modes. Newmark (the paper's method, or the fast method's `integrator = "newmark"`): the
-    compiled modal core with all modes (none for a rigid solid), or sparse Newmark around the
-    same core for solids too large for all modes (`sparse` forces either)."""
-    from .coupling.solver import ModalSolver
+    """The solver of a built problem (`coupling.protocol.Solver`), its modes fetched: the fast
+    method's exact integrator with the modes below its cut-off (for solids beyond
+    `solid.modal.DENSE_LIMIT` DOFs only those are computed, at most `problem.max_modes`);
+    Newmark (the paper's method, or `integrator = "newmark"`) on all modes, none for a rigid
+    solid, or sparse Newmark for solids too large for all modes (`sparse` forces either)."""
+    from .coupling.modal import ModalSolver
     from .solid.modal import DENSE_LIMIT, all_modes, modes_below
 
-    solid, per, settings = problem.solid, problem.schedule.per, problem.settings
+    solid, settings = problem.solid, problem.settings
     large = sparse if sparse is not None else solid.ndof > DENSE_LIMIT
     if settings.method == "fast" and settings.integrator == "exact" and not sparse:
         from .coupling.exact.solver import ExactSolver
 
-        v_ref, e_ref = reference_scales(problem)
-        auto = settings.mode_cutoff == "auto"
-        if auto:
-            settings = replace(settings, mode_cutoff=auto_mode_cutoff(problem.system, v_ref, settings.rtol))
         modes = None
         if solid.ndof and large:
-            # a large solid: its modes below the cut-off by Lanczos; the automatic cut-off keeps at
-            # most LARGE_SOLID_MODES of them (the propagated modes set the cost of every step)
-            modes = modes_below(solid, float(settings.mode_cutoff), LARGE_SOLID_MODES if auto else None)
-            top = float(modes.omega[-1]) / (2 * np.pi) * (1 + 1e-9)  # below the cut-off when the count capped it
-            settings = replace(settings, mode_cutoff=min(float(settings.mode_cutoff), top))
+            modes = modes_below(solid, float(settings.mode_cutoff), problem.max_modes)
         elif solid.ndof:
             modes = all_modes(solid)
-        solver = ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, v_ref, e_ref,
-                             load_kinks(problem.system))
-    elif large:
+        return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, problem.scales,
+                           problem.kinks, problem.solid_force0)
+    if large:
         from .coupling.sparse import SparseSolver
 
-        solver = SparseSolver(problem.system, problem.state, solid, settings, per)
-    else:
-        solver = ModalSolver(problem.system, problem.state, solid, settings, per, all_modes(solid) if solid.ndof else None)
-    solver.solid_force0 = problem.solid_force0
-    return solver
-
-
-def reference_scales(problem: Problem) -> tuple[float, float]:
-    """The velocity and energy scales of the adaptive step's error (`granular.system.load_scales`)."""
-    return load_scales(problem.system, problem.state, problem.schedule.duration)
-
-
-# the automatic cut-off's most eigenmodes on a solid beyond solid.modal.DENSE_LIMIT DOFs
-LARGE_SOLID_MODES = 600
-
-# the dropped modes' quasi-static error in the energies, measured on the strong SSGM-side plate
-# case at cut-offs of 0.25-4 MHz: about TRUNCATION_ERROR (f_H / f_cut)^2 of the input
-TRUNCATION_ERROR = 0.1
-
-
-def contact_frequency(system, v_ref: float) -> float:
-    """The highest Hertz contact frequency at the solid [Hz]: each solid contact's granule striking
-    it at v_ref (the largest speed the loads impart), sqrt(k/m) / 2 pi with k = 3/2 A sqrt(delta)
-    at the impact's peak overlap (eq. 2)."""
-    best = 0.0
-    for c, sc in enumerate(system.solid_contacts):
-        m, A = float(system.mass[sc.granule]), float(system.points.A[c])
-        delta = (5.0 * m * v_ref * v_ref / (4.0 * A)) ** 0.4
-        best = max(best, float(np.sqrt(1.5 * A * np.sqrt(delta) / m)) / (2 * np.pi))
-    return best
-
-
-def auto_mode_cutoff(system, v_ref: float, rtol: float) -> float:
-    """The exact integrator's mode cut-off from its tolerance: the frequency where the dropped
-    modes' quasi-static error, about TRUNCATION_ERROR (f_H / f_cut)^2 with f_H the stiffest solid
-    contact's Hertz frequency, is 3 rtol (1.66 MHz for the strong SSGM-side shock at rtol 1e-5)."""
-    f_h = contact_frequency(system, v_ref)
-    return f_h * float(np.sqrt(TRUNCATION_ERROR / (3.0 * rtol))) if f_h > 0 else 2e6
-
-
-def load_kinks(system) -> list[float]:
-    """Times where a load's history or a wall's motion is not smooth: a step never crosses them."""
-    return [t for e in system.excitations for t in e.history.kinks()] + \
-        [t for w in system.walls if w.drive is not None for t in w.drive.kinks()]
+        return SparseSolver(problem.system, problem.state, solid, settings, problem.schedule.per, problem.solid_force0)
+    return ModalSolver(problem.system, problem.state, solid, settings, problem.schedule.per,
+                       all_modes(solid) if solid.ndof else None, problem.solid_force0)
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,
@@ -122,7 +71,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
         attrs["input_texts"] = encode(problem.input_texts)
     attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
     attrs.update(problem.equilibrium or {})
-    omega = solver.modes.omega if getattr(solver, "modes", None) is not None else None
+    omega = solver.modes.omega if solver.modes is not None else None
     spec = trajectory_spec(traj, problem.system, solid, attrs, omega)
     if problem.equilibrium_contacts is not None:  # the static equilibrium, contact by contact
         names, force, overlap = problem.equilibrium_contacts

@@ -136,6 +136,15 @@ class StepLog(NamedTuple):
     lam: np.ndarray  # (cap, nc)
 
 
+LOG_CAPACITY = 65536  # steps per compiled call at most
+
+
+def step_log(nc: int) -> StepLog:
+    """An empty per-step log of LOG_CAPACITY steps for nc contacts (the compiled loops fill it)."""
+    return StepLog(t=np.zeros(LOG_CAPACITY), h=np.zeros(LOG_CAPACITY), iterations=np.zeros(LOG_CAPACITY, np.int64),
+                   lam=np.zeros((LOG_CAPACITY, nc)))
+
+
 class Prediction(NamedTuple):
     """The contacts' motion at the step's start (u, v, a, flat 2nc) and their predicted
     acceleration at its end without interface forces (a_pred)."""

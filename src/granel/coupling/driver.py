@@ -1,11 +1,5 @@
-"""The one driver loop of every solver: the output schedule, progress, checkpoints and resume.
-
-A solver (`coupling.solver.ModalSolver`, `coupling.sparse.SparseSolver`) offers `start()`,
-`advance(k, trajectory)` to output k, `observe()`, `solid_snapshot()`, `save()`/`load(arrays)`
-and `attributes()`; one that computes its outputs in blocks (`coupling.exact.solver.ExactSolver`) also
-offers `advance_block(k, trajectory)`, which returns the outputs from k on that it reached as
-arrays (first axis: the output), and `solid_block(rows)`. The driver never sees the physics
-inside.
+"""The one driver loop of every solver: the output schedule, the guards, progress, checkpoints
+and resume. It sees a solver only through `coupling.protocol.Solver`, never the physics inside.
 """
 
 from __future__ import annotations
@@ -17,6 +11,8 @@ import numpy as np
 
 from ..io.checkpoint import load_checkpoint, save_checkpoint
 from ..io.trajectory import Trajectory
+from .observation import Observation
+from .protocol import Solver
 
 
 @dataclass(frozen=True)
@@ -69,47 +65,38 @@ class Guards:
     energy_floor: float = 0.0  # [J] the energy put in is counted as at least this (a run's first outputs)
 
 
-def _guarded(obs: dict, ledger0: float, energy0: float, guards: Guards, t: float) -> dict:
-    """The observation with the balance error relative to the initial ledger, after the checks."""
-    obs = dict(obs)
-    ratio, where = obs.pop("overlap_ratio", 0.0), obs.pop("overlap_at", "")
-    obs["balance_error"] = obs["balance_error"] - ledger0
-    if not (np.all(np.isfinite(obs["pos"])) and np.all(np.isfinite(obs["vel"]))):
+def check_guards(obs: Observation, ledger0: float, energy0: float, guards: Guards) -> None:
+    """PhysicsStop at the first output of a block that breaks a rule: a non-finite granular state,
+    an energy ledger (13) off its initial value ledger0 by more than balance_limit of the energy
+    put in, or an overlap deeper than overlap_limit of the radius."""
+    K = len(obs)
+    finite = np.isfinite(obs.pos).reshape(K, -1).all(axis=1) & np.isfinite(obs.vel).reshape(K, -1).all(axis=1)
+    balance = obs.ledger - ledger0
+    scale = np.maximum(np.abs(obs.input_work), max(energy0, guards.energy_floor))
+    lost = (scale > 0) & (np.abs(balance) > guards.balance_limit * scale)
+    deep = obs.overlap_ratio > guards.overlap_limit
+    bad = ~finite | lost | deep
+    if not bad.any():
+        return
+    i = int(np.argmax(bad))
+    t = float(obs.times[i])
+    if not finite[i]:
         raise PhysicsStop(f"t = {t:.6e} s: the granular state is not finite")
-    scale = max(abs(float(obs["input_work"])), energy0, guards.energy_floor)
-    if scale > 0 and abs(obs["balance_error"]) > guards.balance_limit * scale:
-        raise PhysicsStop(f"t = {t:.6e} s: the energy balance (13) is off by {abs(obs['balance_error']) / scale:.2e} of the "
+    if lost[i]:
+        raise PhysicsStop(f"t = {t:.6e} s: the energy balance (13) is off by {abs(balance[i]) / scale[i]:.2e} of the "
                           f"energy put in (limit simulation.balance_limit = {guards.balance_limit:g}): the results would be "
                           "wrong; reduce simulation.dt (or the tolerances) or check the loads")
-    if ratio > guards.overlap_limit:
-        raise PhysicsStop(f"t = {t:.6e} s: {where} overlap by {ratio:.1%} of the radius (limit simulation.overlap_limit = "
-                          f"{guards.overlap_limit:g}): the step is too large for the loads or a body passed through another; "
-                          "reduce simulation.dt or the loads")
-    return obs
+    raise PhysicsStop(f"t = {t:.6e} s: {obs.overlap_at[i]} overlap by {obs.overlap_ratio[i]:.1%} of the radius (limit "
+                      f"simulation.overlap_limit = {guards.overlap_limit:g}): the step is too large for the loads or a body "
+                      "passed through another; reduce simulation.dt or the loads")
 
 
-def _guarded_block(obs: dict, ledger0: float, energy0: float, guards: Guards, times) -> dict:
-    """`_guarded` for a block of outputs (arrays whose first axis is the output): the first
-    output that breaks a rule stops the run with its own time and message."""
-    obs = dict(obs)
-    ratio, where = obs.pop("overlap_ratio"), obs.pop("overlap_at")
-    obs["balance_error"] = obs["balance_error"] - ledger0
-    finite = np.isfinite(obs["pos"]).reshape(len(times), -1).all(axis=1) & np.isfinite(obs["vel"]).reshape(len(times), -1).all(axis=1)
-    scale = np.maximum(np.abs(obs["input_work"]), max(energy0, guards.energy_floor))
-    lost = (scale > 0) & (np.abs(obs["balance_error"]) > guards.balance_limit * scale)
-    bad = ~finite | lost | (ratio > guards.overlap_limit)
-    if bad.any():
-        i = int(np.argmax(bad))
-        one = {k: v[i] for k, v in obs.items()}
-        one.update(balance_error=one["balance_error"] + ledger0, overlap_ratio=float(ratio[i]), overlap_at=where[i])
-        _guarded(one, ledger0, energy0, guards, float(times[i]))  # raises with the output's own message
-    return obs
-
-
-def _initial(obs: dict) -> tuple[float, float]:
-    """From the first output: the ledger E + D - W (eq. 13) and the energy E the run starts with."""
-    energy = float(np.sum(obs["energy_media"]) + obs["energy_solid"])
-    return energy + float(obs["dissipated_viscous"] + obs["dissipated_friction"] - obs["input_work"]), energy
+def _initial_of_record(traj: Trajectory) -> tuple[float, float]:
+    """The ledger (13) and the energy a run started with, from its first recorded output (for a
+    checkpoint written before they were stored with it)."""
+    first = {k: traj.first(k) for k in traj.names}
+    energy = float(np.sum(first["energy_media"]) + first["energy_solid"])
+    return energy + float(first["dissipated_viscous"] + first["dissipated_friction"] - first["input_work"]), energy
 
 
 class WallTimeExceeded(RuntimeError):
@@ -129,7 +116,7 @@ def _watcher(progress, max_wall, t_start):
     return watch
 
 
-def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "",
+def drive(solver: Solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "",
           guards: Guards | None = None, max_wall: float | None = None) -> Trajectory:
     """Run `solver` through `schedule`: record every output, store the solid state at its
     outputs, report progress(t) and write a resumable checkpoint every `checkpoint_every`
@@ -138,48 +125,46 @@ def drive(solver, schedule: Schedule, progress=None, checkpoint=None, resume=Non
     time the run stops (`WallTimeExceeded`), its last checkpoint resumable."""
     guards = guards or Guards()
     t_start = time.perf_counter()
+
+    def record(first: int) -> None:
+        obs = solver.observe()
+        check_guards(obs, ledger0, energy0, guards)
+        traj.record_block(obs.times, obs.recorded(ledger0))
+        rows = np.flatnonzero(np.arange(first, first + len(obs)) % schedule.solid_every == 0)
+        if len(rows):
+            traj.record_solid_block(obs.times[rows], solver.solid_states(rows))
+
     if resume is not None:
         arrays, recorded, _ = load_checkpoint(resume, fingerprint)
-        solver.load(arrays)
+        solver.restore(arrays)
         traj = Trajectory.unpack(recorded)
-        start = int(arrays["k"])
-        # the recorded balance starts at zero: rebuild the initial ledger from the first output
-        ledger0, energy0 = _initial({k: traj.first(k) for k in traj.names})
+        k = int(arrays["k"])
+        if "driver:ledger0" in arrays:
+            ledger0, energy0 = float(arrays["driver:ledger0"]), float(arrays["driver:energy0"])
+        else:
+            ledger0, energy0 = _initial_of_record(traj)
     else:
         solver.start()
         traj = Trajectory()
-        obs = solver.observe()
-        ledger0, energy0 = _initial(obs)
-        traj.record(solver.t, _guarded(obs, ledger0, energy0, guards, solver.t))
-        traj.record_solid(solver.t, solver.solid_snapshot())
-        start = 0
+        first = solver.observe()
+        ledger0 = float(first.ledger[0])
+        energy0 = float(np.sum(first.energy_media[0]) + first.energy_solid[0])
+        record(0)
+        k = 0
     every = schedule.checkpoint_period() if checkpoint else 0
     t_wall = time.perf_counter()
     traj.watch = _watcher(progress, max_wall, t_start)
-    block = getattr(solver, "advance_block", None)
-    k = start
     while k < schedule.outputs:
-        if block is None:
-            solver.advance(k + 1, traj)
-            traj.watch(solver.t)
-            traj.record(solver.t, _guarded(solver.observe(), ledger0, energy0, guards, solver.t))
-            if (k + 1) % schedule.solid_every == 0:
-                traj.record_solid(solver.t, solver.solid_snapshot())
-            k += 1
-        else:  # outputs k + 1 .. k + m, ending at a checkpoint's output; the error of an output beyond
-            times, obs, error = block(k + 1, traj)
-            m = len(times)
-            if m:
-                traj.watch(float(times[-1]))
-                traj.record_block(times, _guarded_block(obs, ledger0, energy0, guards, times))
-                rows = np.flatnonzero(np.arange(k + 1, k + m + 1) % schedule.solid_every == 0)
-                if len(rows):
-                    traj.record_solid_block(times[rows], solver.solid_block(rows))
-            k += m
-            if error is not None:
-                raise error
+        reached = solver.advance(k + 1, traj)  # outputs k + 1 .. k + m
+        if reached.count:
+            traj.watch(float(solver.observe().times[-1]))
+            record(k + 1)
+        k += reached.count
+        if reached.error is not None:
+            raise reached.error
         if every and k % every == 0 and k < schedule.outputs:
-            save_checkpoint(checkpoint, fingerprint, {**solver.save(), "k": k}, traj.pack(), traj.times)
+            state = {**solver.checkpoint(), "k": k, "driver:ledger0": ledger0, "driver:energy0": energy0}
+            save_checkpoint(checkpoint, fingerprint, state, traj.pack(), traj.times)
     traj.solver = {**solver.attributes(), "wall_time_s": time.perf_counter() - t_wall}
     traj.watch = None
     return traj

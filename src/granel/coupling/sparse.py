@@ -19,7 +19,10 @@ from ..granular.system import GranularState, GranularSystem, Stepper
 from ..solid.base import SolidModel
 from ..solid.newmark import Newmark, NewmarkState
 from . import core
-from .solver import SolverError, SolverSettings, contact_frame, observation
+from .frame import contact_frame, contact_normals
+from .observation import Observation, observe_outputs
+from .protocol import Reached, SolverError, StepSink
+from .settings import SolverSettings
 
 
 @dataclass
@@ -31,12 +34,16 @@ class StepOperators:
 
 
 class SparseSolver:
-    """The coupled step with sparse Newmark; same driver interface as `solver.ModalSolver`."""
+    """The coupled step with sparse Newmark, one output per `advance`."""
 
     def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
-                 outputs_every: int):
+                 outputs_every: int, preload=None):
         self.system, self.model, self.settings = system, model, settings
+        self.name = f"{settings.method}-sparse"
+        self.modes = None  # the solid is stepped in its nodal coordinates
         self.y0 = state0.y.copy()
+        self.preload = preload  # (nc, 2) static forces on the solid at t = 0, or None
+        self.normals = contact_normals(system)
         self.stepper = Stepper(system, substep=True)
         self.newmark = Newmark(model.M, model.K)
         self.B = model.contact_map()
@@ -46,10 +53,6 @@ class SparseSolver:
         self.per_ticks = outputs_every * 2**settings.halvings
         self._ops: dict[int, StepOperators] = {}
         self.work = core.iter_work(self.y0, len(system.solid_contacts))
-
-    @property
-    def name(self) -> str:
-        return self.settings.method
 
     def operators(self, level: int) -> StepOperators:
         ops = self._ops.get(level)
@@ -74,11 +77,9 @@ class SparseSolver:
         return cache
 
     # ------------------------------------------------------------ state
-    solid_force0 = None  # (nc, 2) static forces on the solid at t = 0 (a preload), set by run.make_solver
-
     def start(self) -> None:
         nc = len(self.frame.tangent)
-        F0 = np.zeros((nc, 2)) if self.solid_force0 is None else np.asarray(self.solid_force0, float)
+        F0 = np.zeros((nc, 2)) if self.preload is None else np.asarray(self.preload, float)
         BtF = self.Bt @ F0.ravel()
         x0 = splu(self.model.K.tocsc()).solve(BtF) if np.any(BtF) else None  # at rest under F0
         self.sol = self.newmark.initial(x0, None, BtF if x0 is not None else None)
@@ -88,12 +89,12 @@ class SparseSolver:
                                     u=self.B @ self.sol.x, v=np.zeros(2 * nc), a=np.zeros(2 * nc), normal=z, vrel=z.copy(),
                                     clock=core.new_clock())
 
-    def save(self) -> dict:
+    def checkpoint(self) -> dict:
         out = {f"st:{k}": np.asarray(v) for k, v in self.st._asdict().items()}
         out.update({"sx": self.sol.x, "sv": self.sol.v, "sa": self.sol.a, "ref_pos": self.stepper.nl.ref_pos})
         return out
 
-    def load(self, arrays: dict) -> None:
+    def restore(self, arrays: dict) -> None:
         arrays = core.upgraded_state(arrays)
         self.st = core.CoupledState(**{k: np.array(arrays[f"st:{k}"]) for k in core.CoupledState._fields})
         self.sol = NewmarkState(np.array(arrays["sx"]), np.array(arrays["sv"]), np.array(arrays["sa"]), self.t)
@@ -104,7 +105,7 @@ class SparseSolver:
         return float(self.st.clock[0]["t"])
 
     # ------------------------------------------------------------ stepping
-    def advance(self, k: int, trajectory) -> None:
+    def advance(self, k: int, steps: StepSink) -> Reached:
         st, s = self.st, self.settings
         H = s.halvings
         clock = st.clock[0]
@@ -136,20 +137,22 @@ class SparseSolver:
             clock["t"] += ops.h
             clock["ticks"] += 2 ** (H - level)
             clock["level"] = level
-            trajectory.log_steps([self.t], [ops.h], [its], lam[None, :])
+            steps.log_steps([self.t], [ops.h], [its], lam[None, :])
             self.stepper.maybe_refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
+        return Reached(1)
 
     # ------------------------------------------------------------ what the driver records
-    def observe(self) -> dict:
+    def observe(self) -> Observation:
         nc = len(self.frame.tangent)
-        su = (self.B @ self.sol.x).reshape(nc, 2)
-        return observation(self.stepper, GranularState(self.st.y, self.t), su, self.model.energy(self.sol.x, self.sol.v),
-                           self.st.F, self.frame.tangent, self.system)
+        su = (self.B @ self.sol.x).reshape(1, nc, 2)
+        energy = np.array([self.model.energy(self.sol.x, self.sol.v)], float)
+        return observe_outputs([self.t], self.st.y[None], su, energy, self.st.F[None], self.system, self.stepper.model,
+                               self.normals, self.frame.tangent)
 
-    def solid_snapshot(self) -> dict:
-        return {"q": self.sol.x.astype(np.float32), "v": self.sol.v.astype(np.float32)}
+    def solid_states(self, rows) -> dict:
+        return {"q": self.sol.x[None].astype(np.float32), "v": self.sol.v[None].astype(np.float32)}
 
     def attributes(self) -> dict:
         s = self.settings
-        return {"name": f"{s.method}-sparse", "dt0": s.dt, "abstol": s.abstol, "reltol": s.reltol, "lambda_max": s.lambda_max,
+        return {"name": self.name, "dt0": s.dt, "abstol": s.abstol, "reltol": s.reltol, "lambda_max": s.lambda_max,
                 "max_halvings": s.halvings, "neighbour_rebuilds": self.stepper.rebuilds, "solid_representation": "nodal"}

@@ -24,7 +24,7 @@ from .materials import (
 )
 from . import kernels
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
-    interface_buffers, state_size, still
+    state_size, still
 from .packing import Medium, Wall
 
 
@@ -294,36 +294,6 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
-def load_scales(system: GranularSystem, state: GranularState, duration: float = 0.0) -> tuple[float, float]:
-    """A run of `duration` seconds: its velocity and energy scales. The velocity: the largest speed
-    a load can give its granule (peak impulse / mass), or the initial motion's. The energy: the
-    kinetic energy that speed carries, or, for a drive (harmonic, chirp), the work its amplitude
-    does at that speed over the time it drives, A v D / 2, which over many cycles is what flows
-    through the system; 1 m/s and 1 J if nothing is bounded (constant loads alone)."""
-    scales = []
-    for e in system.excitations:
-        m, h = system.mass[e.granule], e.history
-        v = h.peak_impulse() / m
-        if not (np.isfinite(v) and v > 0):
-            continue
-        energy = 0.5 * m * v * v
-        if h.kind in ("harmonic", "chirp") and duration > 0:
-            driving = max(0.0, min(h.params[3], duration - h.params[2]))
-            energy = max(energy, 0.5 * abs(h.params[0]) * v * driving)
-        scales.append((v, energy))
-    for w in system.walls:  # a shaker: the speed it gives a granule, and that granule's energy then
-        if w.drive is not None and system.n:
-            sp = w.drive.peak_speed()
-            scales.append((sp, 0.5 * float(system.mass.max()) * sp * sp))
-    v = np.abs(state.vel)
-    for g in (np.flatnonzero(v.max(axis=1) > 0) if v.size else []):
-        sp = float(np.hypot(*state.vel[g]))
-        scales.append((sp, 0.5 * system.mass[g] * sp * sp))
-    if not scales:
-        return 1.0, 1.0
-    return max(s for s, _ in scales), max(e for _, e in scales)
-
-
 def load_bundle(excitations: list[Excitation]) -> Loads:
     """The applied loads as compiled-kernel arrays (kinds in excitation.KIND_CODES)."""
     ne = len(excitations)
@@ -419,36 +389,7 @@ class Stepper:
         su = self.still.u0 if su is None else su
         return kernels.granule_energies(state.y, self.model, su)
 
-    def deepest_overlap(self, state: GranularState, su=None) -> tuple[float, str]:
-        """The largest overlap of any contact (pair, wall, solid point; eq. 2) over the smaller
-        radius, and where it is: a guard against granules passing through each other, a wall or
-        the solid."""
-        dp, dw, ds = kernels.overlaps(state.y, self.model, self.still.u0 if su is None else su)
-        R, m = self.system.radius, self.model
-        cands = [(0.0, "")]
-        for kind, ratio in enumerate((dp / np.minimum(R[m.pairs.i], R[m.pairs.j]) if dp.size else dp,
-                                      dw / R[m.walls.g] if dw.size else dw, ds / R[m.points.g] if ds.size else ds)):
-            if ratio.size:
-                k = int(np.argmax(ratio))
-                cands.append((float(ratio[k]), contact_label(self.system, m, kind, k)))
-        return max(cands)
-
-    def wall_forces(self, state: GranularState) -> np.ndarray:
-        """The force each rigid wall takes from the granules, (n_walls, 2) [N]."""
-        out = np.zeros((len(self.system.walls), 2))
-        kernels.wall_forces(state.y, self.model, out, state.t)
-        return out
-
     def medium_energy(self, state: GranularState, su=None) -> np.ndarray:
         """Energy of each medium, eq. (11): shape (n_media,)."""
         kin, rot, pot = self.energies(state, su)
         return np.bincount(self.system.medium_index, weights=kin + rot + pot, minlength=len(self.system.media))
-
-    def interface(self, state: GranularState, su=None, sv=None):
-        """The forces on the solid at its contact points (and their derivatives), for the granular
-        state and the points' displacement su and velocity sv (`bundles.InterfaceForces`)."""
-        nc = len(self.system.solid_contacts)
-        out = interface_buffers(nc)
-        kernels.interface_forces(state.y, self.model, self.still.u0 if su is None else su,
-                                 self.still.u0 if sv is None else sv, out)
-        return out

@@ -1,10 +1,13 @@
 """Resumable checkpoints: the full integrator state plus the outputs recorded so far (npz,
 written atomically). A checkpoint carries a fingerprint of the scenario so that a run is only
-resumed with the scenario that wrote it."""
+resumed with the scenario that wrote it, and the digest of its own bytes (the archive's comment)
+so that a file changed anywhere is refused."""
 
 from __future__ import annotations
 
 import hashlib
+import io
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +29,30 @@ def save_checkpoint(path: str | Path, fp: str, arrays: dict, recorded: dict, tim
         payload[f"rec:{k}"] = np.asarray(v)
     from .results import atomic_path
 
+    buffer = io.BytesIO()
+    np.savez(buffer, **payload)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **payload)
+        fh.write(signed(buffer.getvalue()))
     return path
+
+
+DIGEST_TAG = b"granel-sha256:"
+
+
+def signed(archive: bytes) -> bytes:
+    """A zip archive with no comment, given the digest of its bytes as its comment (the last two
+    bytes of a comment-less archive are the comment's length)."""
+    comment = DIGEST_TAG + hashlib.sha256(archive).hexdigest().encode()
+    return archive[:-2] + struct.pack("<H", len(comment)) + comment
+
+
+def signature_holds(raw: bytes) -> bool | None:
+    """Whether a signed archive's bytes match their digest; None for an archive written before
+    checkpoints were signed."""
+    size = len(DIGEST_TAG) + 64
+    if len(raw) < size + 22 or raw[-size:-64] != DIGEST_TAG or raw[-size - 2:-size] != struct.pack("<H", size):
+        return None
+    return hashlib.sha256(raw[:-size - 2] + b"\x00\x00").hexdigest().encode() == raw[-64:]
 
 
 class CheckpointError(RuntimeError):
@@ -59,7 +83,13 @@ def load_checkpoint(path: str | Path, fp: str) -> tuple[dict, dict, list]:
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path}: not a file")
     try:
-        z = np.load(path, allow_pickle=False)
+        raw = path.read_bytes()
+    except OSError as e:
+        raise CheckpointError(f"checkpoint {path}: unreadable ({_why(e)})") from None
+    if signature_holds(raw) is False:
+        raise CheckpointError(f"checkpoint {path}: corrupt (its bytes do not match the digest it was written with)")
+    try:
+        z = np.load(io.BytesIO(raw), allow_pickle=False)
     except Exception as e:  # noqa: BLE001 - OSError, EOFError, BadZipFile, ValueError (pickled data), ...
         raise CheckpointError(f"checkpoint {path}: unreadable or not a checkpoint ({_why(e)})") from None
     if not isinstance(z, np.lib.npyio.NpzFile):  # a bare .npy array

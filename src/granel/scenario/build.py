@@ -5,15 +5,17 @@ geometry (`check_scenario`). Nothing below this layer sees the scenario."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from ..coupling.driver import Guards, Schedule
-from ..coupling.solver import SolverSettings
+from ..coupling.settings import LARGE_SOLID_MODES, SolverSettings
 from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table
 from ..guard.reading import InputFileError
-from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state, load_scales
+from ..granular.scales import auto_mode_cutoff, load_kinks, load_scales
+from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
 from ..granular.materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
 from ..solid.base import SolidModel, rigid_solid
@@ -377,11 +379,16 @@ def build_problem(sc: Scenario) -> Problem:
     force0, report, table = None, None, None
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)
-    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * load_scales(system, state, sc.simulation.duration)[1])
+    scales = load_scales(system, state, sc.simulation.duration)
+    guards = Guards(sc.simulation.balance_limit, sc.simulation.overlap_limit, GUARD_ENERGY_FLOOR * scales[1])
+    settings, max_modes = solver_settings(sc), None
+    if settings.mode_cutoff == "auto":  # the exact integrator's cut-off from its tolerance
+        settings = replace(settings, mode_cutoff=auto_mode_cutoff(system, scales[0], settings.rtol))
+        max_modes = LARGE_SOLID_MODES
     from .files import input_digests, input_texts
 
-    return Problem(system, state, solid, solver_settings(sc), schedule(sc), text, guards, force0, report, table,
-                   input_digests(sc), input_texts(sc))
+    return Problem(system, state, solid, settings, schedule(sc), text, guards, force0, report, table,
+                   input_digests(sc), input_texts(sc), scales=scales, kinks=tuple(load_kinks(system)), max_modes=max_modes)
 
 
 def equilibrate(system, state, solid):

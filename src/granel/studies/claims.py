@@ -128,7 +128,7 @@ def construction_facts(ds) -> dict:
     enforces none: the paper's algorithm, fixed steps, Newmark); `ledger_tol`; and
     `mirror_symmetric` (`_mirror_symmetric`). Without a readable scenario: no guarantee."""
     from .. import scenario as S
-    from ..granular.system import load_scales
+    from ..granular.scales import load_scales
 
     out = {"balance_bound_rel": float("nan"), "ledger_tol": float("nan"), "mirror_symmetric": False}
     try:

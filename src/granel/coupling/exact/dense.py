@@ -65,3 +65,18 @@ def dense_state(state, solid, model, t_out, out):
         return
     dense(StepData(last.y0, last.eta0, last.etad0, t0, last.Fs, last.qs, last.Ts, last.motion, clock.friction_rate),
           solid, model, tau, out)
+
+
+@njit(cache=True)
+def solid_at_outputs(P, omega, oeta, oetad, su, energy):
+    """Per output o of a batch (modes oeta, oetad): the contacts' displacement su[o] = P eta (nc,
+    2) and the solid's kinetic and potential energy (eq. 11) in energy[o]."""
+    nc = P.shape[0] // 2
+    for o in range(oeta.shape[0]):
+        u = np.dot(P, oeta[o]) if P.shape[1] else np.zeros(2 * nc)
+        su[o, :, :] = u.reshape(nc, 2)
+        ep = 0.0
+        for i in range(oeta.shape[1]):
+            ep += 0.5 * omega[i] ** 2 * oeta[o, i] ** 2
+        energy[o, 0] = 0.5 * np.dot(oetad[o], oetad[o])
+        energy[o, 1] = ep
