@@ -9,8 +9,10 @@ import math
 
 import numpy as np
 
-from ...granular.kernels import granule_energies, load_value, overlaps
+from ...granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK
+from ...granular.kernels import load_value, overlaps
 from ...guard.jit import njit
+from ..observation import energy_ledger, granular_energy
 from .operators import modes_of_contacts, propagate_mode
 from .state import GRID_PER_OCTAVE
 
@@ -47,13 +49,11 @@ def trial_ledger(state, solid, cache, slot, model, work):
         unknowns.etad_end[i] = v
         es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
     y = work.granular.y
-    kin, rot, pot = granule_energies(y, model, work.nodes.u[nn - 1].reshape(m2 // 2, 2))
-    n = kin.shape[0]
-    eg = kin.sum() + rot.sum() + pot.sum()
-    spent = y[6 * n] + y[6 * n + 1]
-    work_in = y[6 * n + 2]
-    work.trial[0].roundoff = LEDGER_ROUNDOFF * (es + eg + abs(spent) + abs(work_in))
-    return es + eg + spent - work_in
+    eg = granular_energy(y, model, work.nodes.u[nn - 1].reshape(m2 // 2, 2))
+    acc = 6 * model.granules.radius.shape[0]
+    visc, fric, work_in = y[acc + ACC_VISC], y[acc + ACC_FRIC], y[acc + ACC_WORK]
+    work.trial[0].roundoff = LEDGER_ROUNDOFF * (es + eg + abs(visc + fric) + abs(work_in))
+    return energy_ledger(es, eg, visc, fric, work_in)
 
 
 @njit(cache=True)
@@ -89,15 +89,6 @@ def contact_roundoff(y, dy, model, su, t):
 
 
 @njit(cache=True)
-def granular_ledger(y, model, su):
-    """The granules' part of the ledger (13), E_granular + D - W, with the solid contact points
-    displaced by su (nc, 2)."""
-    kin, rot, pot = granule_energies(y, model, su)
-    n = kin.shape[0]
-    return kin.sum() + rot.sum() + pot.sum() + y[6 * n] + y[6 * n + 1] - y[6 * n + 2]
-
-
-@njit(cache=True)
 def state_ledger(y, eta, etad, solid, model):
     """E_solid + E_granular + D - W (eq. 13) of a state (the granules y, the modes eta, eta')."""
     nc = solid.P.shape[0] // 2
@@ -105,7 +96,9 @@ def state_ledger(y, eta, etad, solid, model):
     for i in range(eta.shape[0]):
         es += 0.5 * (etad[i] * etad[i] + solid.omega[i] ** 2 * eta[i] * eta[i])
     su = np.dot(solid.P, eta) if eta.shape[0] else np.zeros(2 * nc)
-    return es + granular_ledger(y, model, su.reshape(nc, 2))
+    acc = 6 * model.granules.radius.shape[0]
+    return energy_ledger(es, granular_energy(y, model, su.reshape(nc, 2)), y[acc + ACC_VISC], y[acc + ACC_FRIC],
+                         y[acc + ACC_WORK])
 
 
 @njit(cache=True, inline="always")
