@@ -68,7 +68,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .. import scenario as S
-from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, case_metric_names, check_base
+from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, case_metric_names, check_base
 
 # a trial's reason when the study stopped while it ran
 INTERRUPTED = "interrupted"
@@ -463,12 +463,12 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
         probe = SweepSpec(base=spec.base, overrides=spec.overrides, mode="spectrum", spectrum=spec.spectrum,
                           axes=[AxisSpec(field=FREQUENCY_FIELD, values=[spec.frequencies[0]])])
         check_spectrum(probe, base_dir)
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     for k, var in enumerate(spec.variables):
         errors = []
         for v in var.points():
             try:
-                S.load(base, [*spec.overrides, *(f"{f}={_literal(v)}" for f in var.fields)])
+                S.load(base, [*spec.overrides, *(S.override(f, v) for f in var.fields)])
             except S.ScenarioError as e:
                 errors.append((v, str(e)))
         if len(errors) == len(var.points()):
@@ -889,14 +889,14 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
 
     from ..guard.signals import local_cluster
 
-    from .sweep import _connect
+    from .sweep import connect_scheduler
 
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
     target = int(trials or spec.trials)
     if check:
         check_design(spec, base_dir)
-    client = _connect(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
+    client = connect_scheduler(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -1070,7 +1070,7 @@ def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenari
     """The runnable scenario of a trial: the base, the design's overrides and the trial's values
     (no values: the base scenario as the design runs it)."""
     values = trial_case(spec, 0, params)["overrides"] if params else {}
-    return S.load(_base_path(spec, base_dir), [*spec.overrides, *(f"{k}={_literal(v)}" for k, v in values.items())])
+    return S.load(spec.base_path(base_dir), [*spec.overrides, *(S.override(k, v) for k, v in values.items())])
 
 
 def _write_text(path: Path, text: str) -> None:

@@ -168,6 +168,14 @@ class CaseSpec(BaseModel):
         """The case part of a sweep's or a design's JSON."""
         return cls.model_validate({k: v for k, v in json.loads(spec_json).items() if k in cls.model_fields})
 
+    def base_path(self, base_dir: Path) -> str:
+        """The base scenario as `scenario.load` takes it: a built-in name, or its file's path
+        (relative to `base_dir`, the study file's folder)."""
+        if self.base in S.builtin_names():
+            return self.base
+        p = Path(self.base)
+        return str(p if p.is_absolute() else base_dir / p)
+
 
 class SweepSpec(CaseSpec):
     axes: list[AxisSpec] = Field(min_length=1)
@@ -206,24 +214,13 @@ def load_sweep(path) -> tuple[SweepSpec, Path]:
     return spec, path.parent
 
 
-def _literal(v) -> str:
-    """A value as a TOML literal for `apply_overrides`."""
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_literal(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
 # an axis value that leaves its field as the base has it (a zipped field that one case does not use)
 UNSET = "-"
 
 
 def case_overrides(case: dict) -> list[str]:
     """A case's `key=value` overrides (a value of "-" sets nothing)."""
-    return [f"{k}={_literal(v)}" for k, v in case["overrides"].items() if not (isinstance(v, str) and v == UNSET)]
+    return [S.override(k, v) for k, v in case["overrides"].items() if not (isinstance(v, str) and v == UNSET)]
 
 
 def cases(spec: SweepSpec) -> list[dict]:
@@ -239,18 +236,11 @@ def cases(spec: SweepSpec) -> list[dict]:
     return out
 
 
-def _base_path(spec: SweepSpec, base_dir: Path) -> str:
-    if spec.base in S.builtin_names():
-        return spec.base
-    p = Path(spec.base)
-    return str(p if p.is_absolute() else base_dir / p)
-
-
 def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
     """The files a sweep's or a design's cases read: the base scenario (unless a built-in), and
     every granule or load table it, its overrides or its axes name."""
     out = []
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     if base not in S.builtin_names():
         out.append(Path(base))
     folder = Path(base).parent if base not in S.builtin_names() else base_dir
@@ -273,7 +263,7 @@ def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
 def check_base(spec: CaseSpec, base_dir: Path) -> None:
     """Fail early (ScenarioError) when the sweep's base scenario cannot be read or its overrides
     cannot be applied; whether each case's scenario is valid is each case's business."""
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     try:
         raw, _ = S.load_raw(base)
     except (OSError, UnicodeDecodeError) as e:
@@ -296,7 +286,7 @@ def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
     f = float(first["overrides"][FREQUENCY_FIELD])
     for _, driven, _ in sp.runs():
         try:
-            sc = S.load(_base_path(spec, base_dir), ov + sp.overrides(f, driven))
+            sc = S.load(spec.base_path(base_dir), ov + sp.overrides(f, driven))
             system = build_granular(sc, sc.base)[0]
         except S.ScenarioError as e:
             if "excitations.0.granule" in str(e) and "no such granule" in str(e):
@@ -362,7 +352,7 @@ def _cached_run(path: Path, sc: S.Scenario):
 def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict, check_usage: bool = True) -> list[tuple[str, S.Scenario]]:
     """The scenario(s) of one case: two (both directions) in reciprocity mode."""
     ov = list(spec.overrides) + case_overrides(case)
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     if spec.mode == "run":
         return [("run", S.load(base, ov, check_usage))]
     if spec.mode == "spectrum":
@@ -548,7 +538,7 @@ def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
     return ds
 
 
-def _connect(scheduler: str, timeout: float):
+def connect_scheduler(scheduler: str, timeout: float):
     """A Client of the scheduler at `scheduler` with at least one worker, or SchedulerError.
     A Client that fails to connect leaves dask's global `scheduler` setting pointing at it (it
     is never closed): that setting is put back, else xarray would later lock its file writes
@@ -610,7 +600,7 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     spec_json = spec.model_dump_json()
     cluster = None
     if scheduler:
-        client = _connect(scheduler, timeout)
+        client = connect_scheduler(scheduler, timeout)
     else:
         cluster = local_cluster(workers)
         client = Client(cluster)
