@@ -192,14 +192,15 @@ def test_a_folder_holding_another_study_is_refused(tmp_path):
 
 
 def test_the_declared_metrics_are_the_ones_a_case_reports(tmp_path):
-    """Objectives are checked against `case_metric_names`: a run case reports exactly those."""
-    from granel.studies.sweep import CaseSpec, case_metric_names, run_case
+    """Objectives are checked against the mode's metric names: a run case reports exactly those."""
+    from granel.studies.modes import study_mode
+    from granel.studies.sweep import CaseSpec, run_case
 
     (tmp_path / "impact.toml").write_text(IMPACT)
     spec = CaseSpec(base="impact.toml", mode="run", pair=("G:1", "G:1"))
     r = run_case(spec.model_dump_json(), str(tmp_path), {"index": [0], "overrides": {}, "tag": "t"}, str(tmp_path), False)
     assert r["status"] == "ok", r
-    assert set(r["metrics"]) == set(case_metric_names("run"))
+    assert set(r["metrics"]) == set(study_mode("run").metric_units(spec))
     assert not list((tmp_path / "cases").glob("*.nc"))  # keep_runs = False: metrics only
     assert json.loads((tmp_path / "cases" / "t.json").read_text())["metrics"]["granular_mass_kg"] == pytest.approx(
         4 / 3 * math.pi * 0.005**3 * 7850, rel=1e-12)
@@ -298,7 +299,8 @@ def test_a_spectrum_objective_tunes_a_contact_resonance(tmp_path):
     Maximising the band's mobility over F0 in [1.5, 6] N (log) with 40 TPE trials, the mobility
     measured by granel's lock-in on the steady window, lands within 1 % (measured +0.72 %: the
     peak is flat, 1 % in F0 is 0.2 dB); the trial's metrics are the declared band metrics."""
-    from granel.studies.design import band_metric_names, load_design, run_design
+    from granel.studies.design import load_design, run_design
+    from granel.studies.modes import study_mode
 
     (tmp_path / "reso.toml").write_text(RESONATOR)
     (tmp_path / "d.toml").write_text("""name = "resonance"
@@ -329,7 +331,7 @@ direction = "maximize"
     assert f0 == pytest.approx(2.9484, abs=1e-4)
     assert res["best"][0].params["excitations.1.value"] == pytest.approx(f0, rel=0.01)
     metrics = res["best"][0].user_attrs["metrics"]
-    assert set(metrics) == set(band_metric_names(spec))
+    assert set(metrics) == set(study_mode("spectrum").trial_metric_units(spec))
     assert metrics["steady_share_fwd"] == 1.0 and metrics["balance_fwd"] < 1e-5
 
 

@@ -114,12 +114,14 @@ def test_the_cutoff_metric_is_a_run_metric_with_its_reason_when_nan(tmp_path):
     run without a precompressed chain reports NaN with its reason under `notes`, which a design
     trial's failure then quotes."""
     from granel.studies.design import load_design, score
-    from granel.studies.sweep import CaseSpec, case_metric_names, run_case
+    from granel.studies.modes import study_mode
+    from granel.studies.sweep import CaseSpec, run_case
 
-    assert "cutoff_Hz" in case_metric_names("run") and "cutoff_Hz" not in case_metric_names("reciprocity")
     spec = CaseSpec(base=str(CHAIN), mode="run", pair=("C:1", "C:8"))
+    names = study_mode("run").metric_units(spec)
+    assert "cutoff_Hz" in names and "cutoff_Hz" not in study_mode("reciprocity").metric_units(CaseSpec())
     ok = run_case(spec.model_dump_json(), str(tmp_path), {"index": [0], "overrides": {}, "tag": "a"}, str(tmp_path), False)
-    assert ok["status"] == "ok" and set(ok["metrics"]) == set(case_metric_names("run"))
+    assert ok["status"] == "ok" and set(ok["metrics"]) == set(names)
     assert ok["metrics"]["cutoff_Hz"] == pytest.approx(linear_chain(0.005)[2], rel=2e-4) and "notes" not in ok
     loose = CaseSpec(base=str(CHAIN), mode="run", pair=("C:1", "C:8"), overrides=["simulation.equilibrate=false",
                                                                                  "simulation.duration=\"0.2ms\""])

@@ -245,11 +245,11 @@ def test_sweep_bad_scheduler_address_exits_2(sweep_file, tmp_path, address):
 def test_unreachable_scheduler_is_an_io_error_and_leaves_dask_as_it_was():
     import dask
 
-    from granel.studies.sweep import SchedulerError, _connect
+    from granel.studies.sweep import SchedulerError, connect_scheduler
 
     before = dask.config.get("scheduler", None)
     with pytest.raises(SchedulerError, match="cannot reach") as e:
-        _connect("tcp://127.0.0.1:1", timeout=1.0)
+        connect_scheduler("tcp://127.0.0.1:1", timeout=1.0)
     assert e.value.code == 4
     assert dask.config.get("scheduler", None) == before
 

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granel.studies.sweep import cases, load_sweep, run_case, run_sweep
+from granel import scenario as S
+from granel.studies.sweep import case_overrides, cases, load_sweep, run_case, run_sweep
 
 SWEEP = """
 name = "t"
@@ -153,3 +154,11 @@ def test_invalid_sweep_file(tmp_path):
     p.write_text('name = "x"\n[[axes]]\nfield = "contact.mu"\n')
     with pytest.raises(ScenarioError, match="exactly one of"):
         load_sweep(p)
+
+
+@pytest.mark.parametrize("value", ["steel", 'say "hi"', True, 3, 0.1, 1e-300, [1.0, 2.0], ["a", "b"]])
+def test_a_case_value_reads_back_as_itself(value):
+    """A case's axis value becomes an override (`scenario.override`) that the scenario reads back
+    as that value; "-" sets nothing."""
+    ov = case_overrides({"overrides": {"a.b": value, "a.c": "-"}})
+    assert S.apply_overrides({"a": {}}, ov) == {"a": {"b": value}}

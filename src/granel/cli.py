@@ -740,7 +740,7 @@ def spectrum(
     from pydantic import ValidationError
 
     from .studies.spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
-    from .studies.sweep import SweepSpec, check_spectrum, run_spec
+    from .studies.sweep import SweepSpec, cases, check_mode, run_spec
 
     _check_workers(workers)
     for name, value in (("--cycles", cycles), ("--window-cycles", window_cycles), ("--ramp-cycles", ramp_cycles)):
@@ -775,7 +775,7 @@ def spectrum(
     if out.suffix != ".nc":
         _fail(f"-o {out}: give a NetCDF file name ending in .nc")
     try:
-        check_spectrum(spec, Path("."))
+        check_mode(spec, Path("."), cases(spec)[0])
     except S.ScenarioError as e:
         msg = str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure")
         _fail(msg if scenario in msg or "--drive" in msg or "--measure" in msg else f"{scenario}: {msg}")

@@ -25,6 +25,7 @@ from .files import (  # noqa: F401
     input_digests,
     input_texts,
     load_raw,
+    override,
     referenced_files,
     scenario_file,
     to_toml,

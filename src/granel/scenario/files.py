@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import json
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -112,6 +113,22 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         else:
             node[last] = _coerce(val.strip())
     return raw
+
+
+def override(field: str, value) -> str:
+    """The `field=value` override that `apply_overrides` reads back as `value` (a string, bool,
+    number or list of them)."""
+    return f"{field}={_literal(value)}"
+
+
+def _literal(v) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_literal(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else str(v)
 
 
 def to_toml(sc: Scenario) -> str:

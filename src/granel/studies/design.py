@@ -28,7 +28,7 @@ A design file (TOML):
     field = "solid.material"
     choices = ["steel", "aluminium"]
 
-    [[objectives]]                          # a case metric (see `sweep.run_case`), a direction ...
+    [[objectives]]                          # a trial metric of the mode (`modes`), a direction ...
     metric = "nonreciprocity_index"
     direction = "maximize"
     [[objectives]]                          # ... or a target: minimise |metric / target - 1|
@@ -40,10 +40,11 @@ A design file (TOML):
     metric = "granular_mass_kg"
     max = 0.5
 
-Trials: trial k applies the variables' values as overrides on top of the design's; its case is
-run by `sweep.run_case` (fingerprints, failure isolation and metrics are the sweep engine's); an
-invalid design (overlapping granules, an invalid field value, a numerical stop) is a failed trial
-with its reason, and the study goes on. The study lives in DIR/study.journal (Optuna's journal
+Trials: trial k applies the variables' values as overrides on top of the design's; its cases (one,
+or a spectrum's band: `modes.StudyMode.trial_cases`) are run by `sweep.run_case` (fingerprints,
+failure isolation and metrics are the sweep engine's and the mode's); an invalid design
+(overlapping granules, an invalid field value, a numerical stop) is a failed trial with its
+reason, and the study goes on. The study lives in DIR/study.journal (Optuna's journal
 file): a rerun of the same command continues it; a trial that was in flight when a study was
 killed is marked failed ("interrupted") and run again with the same values (its finished case,
 if any, is reused from DIR/cases/). Each trial's sampler is seeded from the design's seed and the
@@ -68,7 +69,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .. import scenario as S
-from .sweep import PEAK_METRICS, SIZE_METRICS, CaseSpec, _base_path, _literal, case_metric_names, check_base
+from .modes import study_mode
+from .spectrum import SpectrumSpec
+from .sweep import CaseSpec, case_scenarios, check_base, check_mode, connect_scheduler, run_case, sweep_inputs
 
 # a trial's reason when the study stopped while it ran
 INTERRUPTED = "interrupted"
@@ -314,7 +317,7 @@ class DesignSpec(CaseSpec):
             for k, f in enumerate(self.frequencies):
                 if not (math.isfinite(f) and f > 0):
                     raise ValueError(f"frequencies.{k} = {f!r}: a drive frequency must be positive [Hz]")
-        known = design_metric_names(self)
+        known = study_mode(self.mode).trial_metric_units(self)
         for what, items in (("objectives", self.objectives), ("constraints", self.constraints)):
             for k, item in enumerate(items):
                 if item.metric not in known:
@@ -342,78 +345,30 @@ class DesignSpec(CaseSpec):
 MAX_BAND = 200
 
 
-def band_metric_names(spec) -> tuple[str, ...]:
-    """The metrics of a spectrum-mode trial (`band_metrics`)."""
-    dirs = [d for d, _, _ in spec.spectrum.runs()]
-    out = [name for d in dirs for name in (f"mobility_{d}_db", f"transmissibility_{d}_db", f"mobility_{d}_db_max",
-                                           f"transmissibility_{d}_db_max", f"steady_share_{d}", f"balance_{d}")]
-    if spec.spectrum.both_directions:
-        out += ["nonreciprocity_db", "nonreciprocity_db_min", "nonreciprocity_db_max"]
-    peaks = [f"{n.replace('_N', '')}{'_' + d if len(dirs) > 1 else ''}_N" for n in PEAK_METRICS for d in dirs]
-    return tuple(out) + SIZE_METRICS + tuple(peaks)
-
-
-def design_metric_names(spec) -> tuple[str, ...]:
-    """What an objective or a constraint of this design may name."""
-    return band_metric_names(spec) if spec.mode == "spectrum" else case_metric_names(spec.mode)
-
-
-def band_metrics(spec, per_frequency: list[dict]) -> dict[str, float]:
-    """A spectrum trial's metrics from its frequencies' case metrics (`spectrum.case_metrics`):
-    per direction the band's mean and largest mobility and transmissibility in dB
-    (20 log10, mobility re 1 m/(N s)), the share of steady runs and the largest balance error;
-    the mean, smallest and largest nonreciprocity [dB]; the design's size and the band's largest
-    peak forces."""
-    out: dict[str, float] = {}
-
-    def db(values):
-        v = np.asarray(values, float)
-        return 20.0 * np.log10(np.where(v > 0, v, np.nan))
-
-    for d, _, _ in spec.spectrum.runs():
-        for q in ("mobility", "transmissibility"):
-            x = db([m[f"{q}_{d}"] for m in per_frequency])
-            out[f"{q}_{d}_db"] = float(np.mean(x))
-            out[f"{q}_{d}_db_max"] = float(np.max(x))
-        out[f"steady_share_{d}"] = float(np.mean([m[f"steady_{d}"] for m in per_frequency]))
-        out[f"balance_{d}"] = float(np.max([m[f"balance_{d}"] for m in per_frequency]))
-    if spec.spectrum.both_directions:
-        nr = np.array([m["nonreciprocity_db"] for m in per_frequency], float)
-        out.update(nonreciprocity_db=float(np.mean(nr)), nonreciprocity_db_min=float(np.min(nr)),
-                   nonreciprocity_db_max=float(np.max(nr)))
-    for key in per_frequency[0]:
-        if key in SIZE_METRICS:
-            out[key] = float(per_frequency[0][key])
-        elif key.startswith("peak_"):
-            out[key] = float(np.max([m[key] for m in per_frequency]))
-    return out
-
-
 def evaluate_trial(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = False) -> dict:
-    """A trial on a worker: its case by the sweep engine's `run_case` (metrics only, unless
-    `keep_runs`), or in spectrum mode one case per frequency of the band and the band's metrics
-    (`band_metrics`; any frequency failing fails the trial, with its reason). `reused`: every
+    """A trial on a worker: the cases its mode runs for it (`StudyMode.trial_cases`), each by
+    the sweep engine's `run_case` (metrics only, unless `keep_runs`). A trial of one case is that
+    case's result; a trial of several (a spectrum's band) has their combined metrics
+    (`StudyMode.trial_metrics`), and any case failing fails it, saying where. `reused`: every
     case was a stored result (`_timed_case`)."""
-    from .spectrum import FREQUENCY_FIELD
-
     spec = DesignSpec.model_validate_json(spec_json)
-    if spec.mode != "spectrum":
+    mode = study_mode(spec.mode)
+    parts = mode.trial_cases(spec, case)
+    if parts == [(case, "")]:  # the trial is its case: run_case's result as it is (its notes too)
         return _timed_case(spec_json, base_dir, case, out_dir, keep_runs)
     start = time.perf_counter()
     res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0, "reused": True}
     per = []
-    for k, f in enumerate(spec.frequencies):
-        sub = {"index": [*case["index"], k], "overrides": {**case["overrides"], FREQUENCY_FIELD: float(f)},
-               "tag": f"{case['tag']}-f{k:03d}"}
+    for sub, where in parts:
         r = _timed_case(spec_json, base_dir, sub, out_dir, keep_runs)
         res["solver_s"] += float(r.get("solver_s", 0.0))
         res["reused"] = res["reused"] and r["reused"]
         if r.get("status") != "ok":
-            res["status"] = f"{r.get('status')} (at {f:g} Hz)"
+            res["status"] = f"{r.get('status')} ({where})"
             break
         per.append(r["metrics"])
     else:
-        res["metrics"] = band_metrics(spec, per)
+        res["metrics"] = mode.trial_metrics(spec, per)
         res["status"] = "ok"
     res["wall_s"] = time.perf_counter() - start
     return res
@@ -423,8 +378,6 @@ def _timed_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_ru
     """`run_case`, with the times of this call: a case whose stored result was returned (the
     same values asked again) reports the stored run's times, longer than the call itself; it
     is marked `reused`, with this call's wall time and no solver time."""
-    from .sweep import run_case
-
     start = time.perf_counter()
     r = run_case(spec_json, base_dir, case, out_dir, keep_runs)
     took = time.perf_counter() - start
@@ -456,19 +409,13 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
     (`check_variables_matter`, first: its reasons say more than a field check's)."""
     check_base(spec, base_dir)
     check_variables_matter(spec, base_dir)
-    if spec.mode == "spectrum":
-        from .spectrum import FREQUENCY_FIELD
-        from .sweep import AxisSpec, SweepSpec, check_spectrum
-
-        probe = SweepSpec(base=spec.base, overrides=spec.overrides, mode="spectrum", spectrum=spec.spectrum,
-                          axes=[AxisSpec(field=FREQUENCY_FIELD, values=[spec.frequencies[0]])])
-        check_spectrum(probe, base_dir)
-    base = _base_path(spec, base_dir)
+    check_mode(spec, base_dir, _probe_case(spec, {}))
+    base = spec.base_path(base_dir)
     for k, var in enumerate(spec.variables):
         errors = []
         for v in var.points():
             try:
-                S.load(base, [*spec.overrides, *(f"{f}={_literal(v)}" for f in var.fields)])
+                S.load(base, [*spec.overrides, *(S.override(f, v) for f in var.fields)])
             except S.ScenarioError as e:
                 errors.append((v, str(e)))
         if len(errors) == len(var.points()):
@@ -544,15 +491,10 @@ def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | Non
     solid: [(scenario, its granular system, fingerprint of the system, its initial state and the
     resolved [simulation] table)], or None when the design is invalid there."""
     from ..scenario.build import build_granular
-    from .sweep import case_scenarios
 
-    ov = dict(overrides)
-    if spec.mode == "spectrum":
-        from .spectrum import FREQUENCY_FIELD
-
-        ov[FREQUENCY_FIELD] = float(spec.frequencies[0])
+    case = _probe_case(spec, overrides)
     try:
-        runs = case_scenarios(spec, base_dir, {"index": [0], "overrides": ov, "tag": "probe"}, check_usage=False)
+        runs = case_scenarios(spec, base_dir, case, check_usage=False)
         out = []
         for _, sc in runs:
             system, state, _ = build_granular(sc, sc.base)
@@ -560,6 +502,12 @@ def _probe_runs(spec: DesignSpec, base_dir: Path, overrides: dict) -> list | Non
         return out
     except Exception:  # noqa: BLE001 - a design invalid there is a failed trial, not a verdict on the variable
         return None
+
+
+def _probe_case(spec: DesignSpec, overrides: dict) -> dict:
+    """The first case that a trial with these overrides runs (`StudyMode.trial_cases`)."""
+    case = {"index": [0], "overrides": dict(overrides), "tag": "probe"}
+    return study_mode(spec.mode).trial_cases(spec, case)[0][0]
 
 
 def _solid_digests(runs: list) -> list[str] | None:
@@ -710,7 +658,6 @@ def design_inputs(spec: DesignSpec, base_dir: Path) -> dict[str, str]:
     from importlib import resources
 
     from ..guard.fingerprints import file_digest, text_digest
-    from .sweep import sweep_inputs
 
     out = {}
     if spec.base in S.builtin_names():
@@ -781,8 +728,6 @@ def design_differences(held: dict, mine: dict) -> list[tuple[str, Any, Any]]:
     [(dotted field, stored value, this value)]. Every field defines it but NOT_DEFINING and the
     objectives' `tolerance` (they change no trial); a field the stored design lacks (added by a
     later granel) counts as its default."""
-    from .spectrum import SpectrumSpec
-
     child = {"variables": VariableSpec, "objectives": ObjectiveSpec, "constraints": ConstraintSpec,
              "spectrum": SpectrumSpec}
     skip = {"objectives": ("tolerance",)}
@@ -889,14 +834,12 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
 
     from ..guard.signals import local_cluster
 
-    from .sweep import _connect
-
     if not scheduler and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
         raise ValueError(f"workers must be a whole number >= 1, got {workers!r}")
     target = int(trials or spec.trials)
     if check:
         check_design(spec, base_dir)
-    client = _connect(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
+    client = connect_scheduler(scheduler, timeout) if scheduler else None  # a bad scheduler fails before anything is written
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -1070,7 +1013,7 @@ def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenari
     """The runnable scenario of a trial: the base, the design's overrides and the trial's values
     (no values: the base scenario as the design runs it)."""
     values = trial_case(spec, 0, params)["overrides"] if params else {}
-    return S.load(_base_path(spec, base_dir), [*spec.overrides, *(f"{k}={_literal(v)}" for k, v in values.items())])
+    return S.load(spec.base_path(base_dir), [*spec.overrides, *(S.override(k, v) for k, v in values.items())])
 
 
 def _write_text(path: Path, text: str) -> None:

@@ -1,5 +1,5 @@
-"""Frequency-resolved transmission and nonreciprocity: the `spectrum` mode of the sweep engine
-and the `granel spectrum` command's inputs and outputs.
+"""Frequency-resolved transmission and nonreciprocity: the measures of the `spectrum` study mode
+(`modes.SpectrumMode`) and the `granel spectrum` command's inputs and outputs.
 
 Each case drives one granule harmonically (the scenario's first excitation made a harmonic at the
 case's frequency and amplitude, ramped up over `ramp_cycles`) for `cycles` drive periods, sampled
@@ -33,8 +33,10 @@ from pydantic import BaseModel, ConfigDict, Field
 FREQUENCY_FIELD = "excitations.0.frequency"
 AMPLITUDE_FIELD = "excitations.0.amplitude"
 DIRECTIONS = ("fwd", "bwd")
-PER_DIRECTION = ("mobility", "transmissibility", "drive_velocity", "measured_velocity", "solid_force", "harmonic2",
-                 "harmonic3", "subharmonic2", "period", "steady", "balance")
+# each run's measures (`run_measures`) and their units ("1": a ratio; period: in drive periods)
+PER_DIRECTION = {"mobility": "m/(N s)", "transmissibility": "1", "drive_velocity": "m/s", "measured_velocity": "m/s",
+                 "solid_force": "1", "harmonic2": "1", "harmonic3": "1", "subharmonic2": "1", "period": "1",
+                 "steady": "1", "balance": "1"}
 # the response repeats within this (RMS over RMS) from period to period in a steady window
 STEADY_RTOL = 2e-2
 # a nonreciprocity is read where both mobilities are within this factor of the largest at that
@@ -198,6 +200,50 @@ def case_metrics(runs: dict, spec: SpectrumSpec) -> dict:
     if spec.both_directions:
         out["nonreciprocity_db"] = float(20.0 * np.log10(out["mobility_fwd"] / out["mobility_bwd"])) \
             if out["mobility_fwd"] > 0 and out["mobility_bwd"] > 0 else float("nan")
+    return out
+
+
+def case_metric_units(spec: SpectrumSpec) -> dict[str, str]:
+    """The names of `case_metrics`, with their units."""
+    out = {f"{k}_{direction}": unit for direction, _, _ in spec.runs() for k, unit in PER_DIRECTION.items()}
+    if spec.both_directions:
+        out["nonreciprocity_db"] = "dB"
+    return out
+
+
+def band_metrics(spec: SpectrumSpec, per_frequency: list[dict]) -> dict[str, float]:
+    """A band's measures from its frequencies' `case_metrics`: per direction the band's mean and
+    largest mobility and transmissibility in dB (20 log10, mobility re 1 m/(N s)), the share of
+    steady runs and the largest balance error; the mean, smallest and largest nonreciprocity."""
+    out: dict[str, float] = {}
+
+    def db(values):
+        v = np.asarray(values, float)
+        return 20.0 * np.log10(np.where(v > 0, v, np.nan))
+
+    for d, _, _ in spec.runs():
+        for q in ("mobility", "transmissibility"):
+            x = db([m[f"{q}_{d}"] for m in per_frequency])
+            out[f"{q}_{d}_db"] = float(np.mean(x))
+            out[f"{q}_{d}_db_max"] = float(np.max(x))
+        out[f"steady_share_{d}"] = float(np.mean([m[f"steady_{d}"] for m in per_frequency]))
+        out[f"balance_{d}"] = float(np.max([m[f"balance_{d}"] for m in per_frequency]))
+    if spec.both_directions:
+        nr = np.array([m["nonreciprocity_db"] for m in per_frequency], float)
+        out.update(nonreciprocity_db=float(np.mean(nr)), nonreciprocity_db_min=float(np.min(nr)),
+                   nonreciprocity_db_max=float(np.max(nr)))
+    return out
+
+
+def band_metric_units(spec: SpectrumSpec) -> dict[str, str]:
+    """The names of `band_metrics`, with their units."""
+    out = {}
+    for d, _, _ in spec.runs():
+        out.update({f"mobility_{d}_db": "dB re 1 m/(N s)", f"transmissibility_{d}_db": "dB",
+                    f"mobility_{d}_db_max": "dB re 1 m/(N s)", f"transmissibility_{d}_db_max": "dB",
+                    f"steady_share_{d}": "1", f"balance_{d}": "1"})
+    if spec.both_directions:
+        out.update(nonreciprocity_db="dB", nonreciprocity_db_min="dB", nonreciprocity_db_max="dB")
     return out
 
 

@@ -23,11 +23,12 @@ Cases are the Cartesian product of the axes (at most MAX_CASES). A value "-" lea
 the base has it (a zipped field that one case's load does not use: an override of a field the run
 ignores is refused, `scenario.usage`).
 
-Resume: a finished case leaves `cases/<tag>.json` (its metrics or its error) and one NetCDF per
-run. A rerun reuses a case's metrics only if it finished ok and its fingerprint matches (see
-`case_fingerprint`: the scenario text of each run, which carries the solver settings, the sweep's
-and the case's overrides, mode and pair, the granel version and the metric rules); a run's
-NetCDF only if its scenario text and granel version match. Failed cases are always rerun.
+What a case runs and measures is its mode's (`modes.StudyMode`: `run`, `reciprocity`,
+`spectrum`). Resume: a finished case leaves `cases/<tag>.json` (its metrics or its error) and one
+NetCDF per run. A rerun reuses a case's metrics only if it finished ok and its fingerprint matches
+(see `case_fingerprint`: the scenario text of each run, which carries the solver settings, the
+sweep's and the case's overrides, the mode's settings, the granel version and the metric rules); a
+run's NetCDF only if its scenario text and granel version match. Failed cases are always rerun.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ import itertools
 import json
 import traceback
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -46,15 +47,16 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from .. import __version__
 from .. import scenario as S
 from ..io.results import ResultFileError
-from .spectrum import FREQUENCY_FIELD, SpectrumSpec, case_metrics
+from .modes import ModeName, study_mode
+from .spectrum import FREQUENCY_FIELD, SpectrumSpec
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
 # the version of the metric definitions: bumped when one changes (2: arrivals relative to the
 # driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
-# `force_metrics`; 4: a chain's measured cut-off, `chain_metrics`; 5: energy shares of the dynamic
-# input alone, NaN with a reason where nothing is dynamic, and the cut-off by modal projection),
-# so that cached results are recomputed
+# `modes.force_metrics`; 4: a chain's measured cut-off, `modes.chain_metrics`; 5: energy shares
+# of the dynamic input alone, NaN with a reason where nothing is dynamic, and the cut-off by modal
+# projection), so that cached results are recomputed
 METRIC_RULES = 5
 
 
@@ -153,7 +155,7 @@ class CaseSpec(BaseModel):
     description: str = ""
     base: str = "paper"
     overrides: list[str] = Field(default_factory=list)
-    mode: Literal["reciprocity", "run", "spectrum"] = "reciprocity"
+    mode: ModeName = "reciprocity"
     pair: tuple[str, str] = ("LSGM:3", "SSGM:C")
     spectrum: SpectrumSpec | None = None
 
@@ -167,6 +169,14 @@ class CaseSpec(BaseModel):
     def of(cls, spec_json: str) -> "CaseSpec":
         """The case part of a sweep's or a design's JSON."""
         return cls.model_validate({k: v for k, v in json.loads(spec_json).items() if k in cls.model_fields})
+
+    def base_path(self, base_dir: Path) -> str:
+        """The base scenario as `scenario.load` takes it: a built-in name, or its file's path
+        (relative to `base_dir`, the study file's folder)."""
+        if self.base in S.builtin_names():
+            return self.base
+        p = Path(self.base)
+        return str(p if p.is_absolute() else base_dir / p)
 
 
 class SweepSpec(CaseSpec):
@@ -206,24 +216,13 @@ def load_sweep(path) -> tuple[SweepSpec, Path]:
     return spec, path.parent
 
 
-def _literal(v) -> str:
-    """A value as a TOML literal for `apply_overrides`."""
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_literal(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
 # an axis value that leaves its field as the base has it (a zipped field that one case does not use)
 UNSET = "-"
 
 
 def case_overrides(case: dict) -> list[str]:
     """A case's `key=value` overrides (a value of "-" sets nothing)."""
-    return [f"{k}={_literal(v)}" for k, v in case["overrides"].items() if not (isinstance(v, str) and v == UNSET)]
+    return [S.override(k, v) for k, v in case["overrides"].items() if not (isinstance(v, str) and v == UNSET)]
 
 
 def cases(spec: SweepSpec) -> list[dict]:
@@ -239,18 +238,11 @@ def cases(spec: SweepSpec) -> list[dict]:
     return out
 
 
-def _base_path(spec: SweepSpec, base_dir: Path) -> str:
-    if spec.base in S.builtin_names():
-        return spec.base
-    p = Path(spec.base)
-    return str(p if p.is_absolute() else base_dir / p)
-
-
 def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
     """The files a sweep's or a design's cases read: the base scenario (unless a built-in), and
     every granule or load table it, its overrides or its axes name."""
     out = []
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     if base not in S.builtin_names():
         out.append(Path(base))
     folder = Path(base).parent if base not in S.builtin_names() else base_dir
@@ -273,7 +265,7 @@ def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
 def check_base(spec: CaseSpec, base_dir: Path) -> None:
     """Fail early (ScenarioError) when the sweep's base scenario cannot be read or its overrides
     cannot be applied; whether each case's scenario is valid is each case's business."""
-    base = _base_path(spec, base_dir)
+    base = spec.base_path(base_dir)
     try:
         raw, _ = S.load_raw(base)
     except (OSError, UnicodeDecodeError) as e:
@@ -281,44 +273,22 @@ def check_base(spec: CaseSpec, base_dir: Path) -> None:
     S.apply_overrides(raw, list(spec.overrides))
 
 
-def check_spectrum(spec: SweepSpec, base_dir: Path) -> None:
-    """Fail early (ScenarioError naming `drive` or `measure`) when a spectrum's granules are not
-    in the base scenario, or both directions would drive the same granule; builds the first
-    case's granular systems, which also checks their scenarios."""
-    from ..scenario.build import build_granular
-
-    sp = spec.spectrum
-    if sp.both_directions and sp.drive == sp.measure:
-        raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: the same granule as spectrum.drive; both directions "
-                              "need two granules")
-    first = cases(spec)[0]
-    ov = list(spec.overrides) + case_overrides(first)
-    f = float(first["overrides"][FREQUENCY_FIELD])
-    for _, driven, _ in sp.runs():
-        try:
-            sc = S.load(_base_path(spec, base_dir), ov + sp.overrides(f, driven))
-            system = build_granular(sc, sc.base)[0]
-        except S.ScenarioError as e:
-            if "excitations.0.granule" in str(e) and "no such granule" in str(e):
-                which = "drive" if driven == sp.drive else "measure"
-                raise S.ScenarioError(f"spectrum.{which} = {driven!r}: no such granule in {spec.base}") from None
-            raise
-        if sp.measure not in system.labels:  # measured in every direction, driven only in both
-            raise S.ScenarioError(f"spectrum.measure = {sp.measure!r}: no such granule in {spec.base} (e.g. "
-                                  f"{system.labels[-1]!r})")
+def check_mode(spec: CaseSpec, base_dir: Path, case: dict) -> None:
+    """Fail early (ScenarioError naming the field) when the mode's settings do not fit `case`'s
+    scenario (`StudyMode.check`)."""
+    study_mode(spec.mode).check(spec, spec.base_path(base_dir), list(spec.overrides) + case_overrides(case),
+                                case["overrides"])
 
 
 def case_fingerprint(spec: CaseSpec, scenarios: list[tuple[str, S.Scenario]], case: dict) -> str:
     """What a case's cached result depends on: the full scenario text of each of its runs (with
     every solver setting of its [simulation] table) and the contents of the files they read, the
-    sweep's and the case's overrides, the mode and the measurement pair, the granel version and
-    the metric rules."""
+    sweep's and the case's overrides, the mode's settings (`StudyMode.fingerprint`), the granel
+    version and the metric rules."""
     payload = {
         "granel_version": __version__,
         "metric_rules": METRIC_RULES,
-        "mode": spec.mode,
-        "pair": list(spec.pair),
-        "spectrum": spec.spectrum.model_dump() if spec.spectrum is not None else None,
+        **study_mode(spec.mode).fingerprint(spec),
         "sweep_overrides": list(spec.overrides),
         "case_overrides": case["overrides"],
         "scenarios": {key: S.to_toml(sc) for key, sc in scenarios},
@@ -360,21 +330,9 @@ def _cached_run(path: Path, sc: S.Scenario):
 
 
 def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict, check_usage: bool = True) -> list[tuple[str, S.Scenario]]:
-    """The scenario(s) of one case: two (both directions) in reciprocity mode."""
-    ov = list(spec.overrides) + case_overrides(case)
-    base = _base_path(spec, base_dir)
-    if spec.mode == "run":
-        return [("run", S.load(base, ov, check_usage))]
-    if spec.mode == "spectrum":
-        f = float(case["overrides"][FREQUENCY_FIELD])
-        if not (np.isfinite(f) and f > 0):
-            raise S.ScenarioError(f"{FREQUENCY_FIELD}: a drive frequency must be positive, got {f!r}")
-        return [(d, S.load(base, ov + spec.spectrum.overrides(f, driven), check_usage)) for d, driven, _ in spec.spectrum.runs()]
-    a, b = spec.pair
-    out = []
-    for exc in (b, a):  # forward: shock on b measured at a; backward: the reverse
-        out.append((f"shock-{exc.replace(':', '')}", S.load(base, ov + [f'excitations.0.granule="{exc}"'], check_usage)))
-    return out
+    """The runs of one case, (key, scenario) each, as its mode makes them (`StudyMode.scenarios`)."""
+    return study_mode(spec.mode).scenarios(spec, spec.base_path(base_dir), list(spec.overrides) + case_overrides(case),
+                                           case["overrides"], check_usage)
 
 
 def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = True) -> dict:
@@ -383,15 +341,9 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
     (the case's time in the worker) and `solver_s` (its runs' time in the solver).
     A stored result is returned instead only if it finished ok with this case's fingerprint
     (`case_fingerprint`); a failed case is run again. `spec_json` is a sweep's or a design's
-    JSON (its `CaseSpec` part is used).
-
-    Metrics (reciprocity mode, per direction): arrival_*_s at the measured granule follows
-    `analysis.reciprocity.pulse_arrival` (5 % of the measured peak, NaN unless that peak reaches
-    1e-3 of the driven granule's peak speed, so that round-off never counts as an arrival);
-    arrival_solid_*_s is the first time the solid holds 1 % of the input work. Run mode adds
-    `chain_metrics` (cutoff_Hz), NaN where a run has no precompressed chain, its reason under
-    `notes`; so are the energy shares of a run with nothing dynamic to share (`run_metrics`)."""
-    from ..analysis.reciprocity import reciprocity_metrics, run_metrics
+    JSON (its `CaseSpec` part is used). The runs and the metrics are the mode's
+    (`StudyMode.scenarios`, `StudyMode.measure`); a metric that is NaN has its reason under
+    `notes`."""
     from ..io.results import write_netcdf
     from ..run import run_scenario
 
@@ -399,6 +351,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
 
     start = time.perf_counter()
     spec = CaseSpec.of(spec_json)
+    mode = study_mode(spec.mode)
     out = Path(out_dir) / "cases"
     done = out / f"{case['tag']}.json"
     res: dict = {"tag": case["tag"], "index": list(case["index"]), "overrides": case["overrides"]}
@@ -417,41 +370,9 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
                 if keep_runs:
                     write_netcdf(ds, path)
             runs[key] = ds
-        if spec.mode == "spectrum":
-            res["metrics"] = case_metrics(runs, spec.spectrum)
-        elif spec.mode == "reciprocity":
-            a, b = spec.pair
-            m = reciprocity_metrics(runs[f"shock-{b.replace(':', '')}"], runs[f"shock-{a.replace(':', '')}"])
-            f, k = m["forward"], m["backward"]
-            res["metrics"] = {
-                "nonreciprocity_index": m["nonreciprocity_index"],
-                "arrival_fwd_s": f["arrival_measured_s"], "arrival_bwd_s": k["arrival_measured_s"],
-                "peak_velocity_fwd": f["peak_velocity_m_s"], "peak_velocity_bwd": k["peak_velocity_m_s"],
-                "energy_far_fwd": f["energy_far_peak_frac"], "energy_far_bwd": k["energy_far_peak_frac"],
-                "solid_energy_fwd": f["solid_energy_peak_frac"], "solid_energy_bwd": k["solid_energy_peak_frac"],
-                "centroid_fwd_hz": f["spectral_centroid_hz"], "centroid_bwd_hz": k["spectral_centroid_hz"],
-                "arrival_solid_fwd_s": f["arrival_solid_s"], "arrival_solid_bwd_s": k["arrival_solid_s"],
-            }
-            named = {"energy_far_peak_frac": "energy_far_{}", "solid_energy_peak_frac": "solid_energy_{}",
-                     "arrival_solid_s": "arrival_solid_{}_s"}
-            notes = {named[key].format(way): why for way, r in (("fwd", f), ("bwd", k)) for key, why in r["notes"].items()
-                     if key in named}
-            if notes:
-                res["notes"] = notes
-        else:
-            ds = runs["run"]
-            from ..analysis.reciprocity import excitation_of
-
-            label, _ = excitation_of(ds)
-            measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
-            r = run_metrics(ds, measured)
-            res["metrics"] = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
-            chain, notes = chain_metrics(scenarios[0][1], ds)
-            res["metrics"].update(chain)
-            notes = {**r["notes"], **notes}
-            if notes:
-                res["notes"] = notes
-        res["metrics"].update(force_metrics(scenarios, runs))
+        res["metrics"], notes = mode.measure(spec, scenarios, runs)
+        if notes:
+            res["notes"] = notes
         res["solver_s"] = sum(float(ds.attrs.get("solver_wall_time_s", np.nan)) for ds in runs.values())
         res["status"] = "ok"
     except Exception as e:  # noqa: BLE001 - a failing case is recorded, the others go on
@@ -463,63 +384,6 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
 
     write_text(done, json.dumps({"written_by": f"{MARK} {__version__}", **res}, default=float))
     return res
-
-
-RUN_METRICS = ("arrival_measured_s", "arrival_solid_s", "peak_velocity_m_s", "energy_far_peak_frac",
-               "energy_far_final_frac", "solid_energy_peak_frac", "input_work_J", "spectral_centroid_hz")
-RECIPROCITY_METRICS = ("nonreciprocity_index", "arrival_fwd_s", "arrival_bwd_s", "peak_velocity_fwd", "peak_velocity_bwd",
-                       "energy_far_fwd", "energy_far_bwd", "solid_energy_fwd", "solid_energy_bwd", "centroid_fwd_hz",
-                       "centroid_bwd_hz", "arrival_solid_fwd_s", "arrival_solid_bwd_s")
-CHAIN_METRICS = ("cutoff_Hz",)
-SIZE_METRICS = ("granular_mass_kg", "footprint_m2")
-PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
-
-
-def case_metric_names(mode: str) -> tuple[str, ...]:
-    """The metrics a case of `mode` ("run" or "reciprocity") reports (see `run_case`)."""
-    if mode == "run":
-        return RUN_METRICS + CHAIN_METRICS + SIZE_METRICS + PEAK_METRICS
-    if mode == "reciprocity":
-        return RECIPROCITY_METRICS + SIZE_METRICS + tuple(n.replace("_N", f"{d}_N") for n in PEAK_METRICS
-                                                          for d in ("_fwd", "_bwd"))
-    raise ValueError(f"mode {mode!r}: its metrics depend on the spectrum's settings")
-
-
-def chain_metrics(sc: S.Scenario, ds) -> tuple[dict[str, float], dict[str, str]]:
-    """A run's chain metrics and, for each one that is NaN, why: cutoff_Hz, the cut-off of a
-    precompressed monatomic chain rung by a pulse (`analysis.narrowband.cutoff_frequency`: its
-    highest mode measured in the free response, over the mode's share of the cut-off for the
-    chain's ends). A run without a static precompression is NaN at once (its reason noted); a
-    chain's costs a modal fit of its beads' velocities (about 0.1 s for 8 beads)."""
-    from ..analysis.narrowband import CutoffError, cutoff_frequency
-    from ..scenario.build import build_granular
-
-    try:
-        if "equilibrium_contact" not in ds:
-            raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant "
-                              "load): a cut-off belongs to a precompressed chain")
-        return {"cutoff_Hz": cutoff_frequency(ds, build_granular(sc, sc.base)[0]).cutoff_hz}, {}
-    except CutoffError as e:
-        return {"cutoff_Hz": float("nan")}, {"cutoff_Hz": str(e)}
-
-
-def force_metrics(scenarios: list[tuple[str, S.Scenario]], runs: dict) -> dict[str, float]:
-    """Every case's size and peak forces (`analysis.contacts`): granular_mass_kg, footprint_m2
-    (of the first run's scenario) and, per run, peak_contact_force_N and peak_wall_force_N,
-    suffixed _fwd / _bwd in reciprocity mode (forward first) and by direction in spectrum mode."""
-    from ..analysis.contacts import design_size, peak_forces
-    from ..scenario.build import build_granular
-
-    out: dict[str, float] = {}
-    suffix = {0: "_fwd", 1: "_bwd"} if len(scenarios) == 2 else {0: ""}
-    for k, (key, sc) in enumerate(scenarios):
-        system = build_granular(sc, sc.base)[0]
-        if k == 0:
-            out.update(design_size(system))
-        peaks = peak_forces(runs[key], system)
-        for name in ("peak_contact_force_N", "peak_wall_force_N"):
-            out[name.replace("_N", f"{suffix.get(k, '_' + key)}_N")] = peaks[name]
-    return out
 
 
 def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
@@ -548,7 +412,7 @@ def summary_dataset(spec: SweepSpec, results: list[dict]) -> xr.Dataset:
     return ds
 
 
-def _connect(scheduler: str, timeout: float):
+def connect_scheduler(scheduler: str, timeout: float):
     """A Client of the scheduler at `scheduler` with at least one worker, or SchedulerError.
     A Client that fails to connect leaves dask's global `scheduler` setting pointing at it (it
     is never closed): that setting is put back, else xarray would later lock its file writes
@@ -610,7 +474,7 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     spec_json = spec.model_dump_json()
     cluster = None
     if scheduler:
-        client = _connect(scheduler, timeout)
+        client = connect_scheduler(scheduler, timeout)
     else:
         cluster = local_cluster(workers)
         client = Client(cluster)
