@@ -182,16 +182,15 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
 
 
 def check_scenario(sc: Scenario, base: Path | None = None) -> None:
-    """Whole-scenario checks that need the built geometry; the built system is kept on the
-    scenario for `build_problem`. The run's needs are estimated first (`estimate.check_needs`),
-    and again with the built granule count."""
+    """Whole-scenario checks that need the built geometry, on a granular system built for them
+    and then dropped (`build_problem` builds its own). The run's needs are estimated first
+    (`estimate.check_needs`), and again with the built granule count."""
     from .estimate import check_needs
 
     check_needs(sc)
-    system, state, media = build_granular(sc, base)
+    system, _, _ = build_granular(sc, base)
     if any(m.granules_file for m in sc.media):
         check_needs(sc, system.n)
-    sc._built = (to_toml(sc), system, state, media)
     check_geometry(sc, system)
     check_load_overlaps(sc, system)
     check_contact_rates(sc, system)
@@ -365,11 +364,9 @@ GUARD_ENERGY_FLOOR = 1e-3
 
 
 def build_problem(sc: Scenario) -> Problem:
-    """Everything a solver needs, built once (the granular system from validation is reused)."""
+    """Everything a solver needs, built from the validated scenario."""
     text = to_toml(sc)
-    built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
-    system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
-    state = type(state)(state.y.copy(), state.t)
+    system, state, _ = build_granular(sc, sc.base)
     try:
         solid = build_solid(sc, system)
     except ValueError as e:  # a contact on a clamped node, layers that overlap, ...
