@@ -16,9 +16,9 @@ from ..guard.reading import InputFileError
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state, load_scales
 from ..granular.materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
-from ..solid.base import SolidModel, rigid_solid
-from ..solid.beam import build_beam
-from ..solid.plate import LayerSpec, PlateMesh, build_plate
+from ..solid.base import SolidModel
+from ..solid.plate import PlateMesh
+from ..solid.recipe import RecipeContact, SolidRecipe, build_solid_model
 from .files import to_toml
 from .tables import read_granules_table
 from .schema import ExcitationSpec, Scenario, ScenarioError
@@ -330,20 +330,22 @@ def check_times(sim) -> None:
 def build_solid(sc: Scenario, system) -> SolidModel:
     """The scenario's solid; one contact point per granule-solid contact of `system`, in the
     same order (names are the granule labels)."""
+    return build_solid_model(solid_recipe(sc, system))
+
+
+def solid_recipe(sc: Scenario, system) -> SolidRecipe:
+    """What the scenario's solid is built from (`solid.recipe`): a rigid solid for none."""
     s = present_solid(sc)
-    if s is None or s.kind == "rigid":
-        return rigid_solid([(c.name, c.point, c.normal) for c in system.solid_contacts])
-    mat = sc.materials[s.material]
-    edges = ["left" if c.normal[0] > 0 else "right" for c in system.solid_contacts]
-    if s.kind == "beam":
-        return build_beam(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.rho,
-                          [(c.name, e, c.point[1]) for c, e in zip(system.solid_contacts, edges)],
-                          s.beam_elements, tuple(s.clamped))
-    mesh = s.mesh
-    layers = [LayerSpec(c.name, e, c.point[1], mesh.layer_fraction * float(system.radius[c.granule]))
-              for c, e in zip(system.solid_contacts, edges)]
-    return build_plate(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho, layers,
-                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers), tuple(s.clamped))
+    kind = "rigid" if s is None else s.kind
+    layer = 0.0 if kind != "plate" else s.mesh.layer_fraction
+    contacts = tuple(RecipeContact(c.name, c.point, c.normal, layer * float(system.radius[c.granule]))
+                     for c in system.solid_contacts)
+    if kind == "rigid":
+        return SolidRecipe("rigid", contacts)
+    mat, mesh = sc.materials[s.material], s.mesh
+    return SolidRecipe(kind, contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho,
+                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers),
+                       s.beam_elements, tuple(s.clamped))
 
 
 def solver_settings(sc: Scenario) -> SolverSettings:
