@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import functools
 
-import numpy as np
-
 from ..granular.loads import WallDrive
 from ..granular.packing import Wall
 from ..granular.system import ContactLaw, GranularSystem, SolidContact
 from ..io.model import read_record
 from ..io.results import ResultFileError
 from ..solid.base import SolidModel, rigid_solid
+from ..solid.modal import all_modes
 from ..solid.recipe import SolidRecipe, build_solid_model
 
 
@@ -63,15 +62,9 @@ _MODES: dict = {}
 def result_modes(ds, name="result"):
     """All modes of a result's solid (`solid.modal.all_modes`, from the disk cache), kept per
     process for the last solid asked for (a movie's frames and a figure's panels share them)."""
-    from ..solid.modal import all_modes
-
     key = read_record(ds, name).solid_digest
     if key not in _MODES:
         _MODES.clear()
         _MODES[key] = all_modes(result_solid(ds, name))
     return _MODES[key]
 
-
-def solid_nodes(ds, name="result") -> np.ndarray | None:
-    """The mesh nodes of a result's solid (n_nodes, 2), None for a rigid one: no build needed."""
-    return read_record(ds, name).nodes
