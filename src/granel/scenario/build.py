@@ -334,7 +334,8 @@ def build_solid(sc: Scenario, system) -> SolidModel:
 
 
 def solid_recipe(sc: Scenario, system) -> SolidRecipe:
-    """What the scenario's solid is built from (`solid.recipe`): a rigid solid for none."""
+    """What the scenario's solid is built from (`solid.recipe`): a rigid solid for none; only the
+    fields its kind uses (a design's probe tells a field that matters by them)."""
     s = present_solid(sc)
     kind = "rigid" if s is None else s.kind
     layer = 0.0 if kind != "plate" else s.mesh.layer_fraction
@@ -343,9 +344,12 @@ def solid_recipe(sc: Scenario, system) -> SolidRecipe:
     if kind == "rigid":
         return SolidRecipe("rigid", contacts)
     mat, mesh = sc.materials[s.material], s.mesh
-    return SolidRecipe(kind, contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho,
+    if kind == "beam":
+        return SolidRecipe("beam", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, rho=mat.rho,
+                           beam_elements=s.beam_elements, clamped=tuple(s.clamped))
+    return SolidRecipe("plate", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho,
                        PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers),
-                       s.beam_elements, tuple(s.clamped))
+                       clamped=tuple(s.clamped))
 
 
 def solver_settings(sc: Scenario) -> SolverSettings:

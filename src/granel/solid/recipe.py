@@ -34,7 +34,7 @@ class SolidRecipe:
     `solid.base.rigid_solid` (kind "plate", "beam" or "rigid"): the rectangle x0, y0, width, length
     and the out-of-plane thickness [m], Young's modulus E [Pa], Poisson's ratio nu, density rho
     [kg/m^3], the contacts, the plate's mesh, the beam's element count and the clamped ends
-    (bottom, top)."""
+    (bottom, top). Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
