@@ -78,12 +78,13 @@ def test_blitted_frame_equals_full_redraw(plate_run, field):
 
 
 def test_deformation_outlines_follow_the_plate(plate_run):
-    from granel.viz.figures import model_of, solid_state_at
+    from granel.analysis.result_model import result_solid
+    from granel.viz.figures import solid_state_at
     from granel.viz.plots import _element_outlines
 
     ds, _ = plate_run
     plan = A.plan_frames(ds, "deformation", magnification=500.0, max_frames=5)
-    model = model_of(ds)[2]
+    model = result_solid(ds)
     q, _, _ = solid_state_at(ds, float(plan.times[-1]))
     ref = np.array(_element_outlines(model, model.full_displacement(q), 500.0))
     np.testing.assert_allclose(plan.plate_verts[-1], ref, rtol=0, atol=1e-12)

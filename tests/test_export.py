@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from granel.viz.animate import solid_states
 from granel.cli import app
 from granel.viz.export import EXTXYZ_PROPERTIES, ExportError, elastic_constants, parse_formats, solid_stress
-from granel.viz.figures import model_of
+from granel.analysis.result_model import result_solid, result_system
 from granel.io.results import read_netcdf
 from granel.solid.beam import build_beam
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate, plane_stress_forms
@@ -73,7 +73,7 @@ def pvd_entries(path):
 
 def reconstruction(ds):
     """The nodal displacement and velocity at every stored solid output, as the movies compute them."""
-    model = model_of(ds)[2]
+    model = result_solid(ds)
     Q, V = solid_states(ds, ds["solid_time"].values)
     return model, np.stack([model.full_displacement(q) for q in Q]), np.stack([model.full_displacement(v) for v in V])
 
@@ -85,7 +85,7 @@ def reconstruction(ds):
 @pytest.mark.parametrize("solid", ["plate", "rigid"])
 def test_granules_vtu_round_trip(runs, solid):
     ds, folder = runs[solid]
-    system = model_of(ds)[1]
+    system = result_system(ds)
     entries = pvd_entries(folder / "granules.pvd")
     close([t for t, _ in entries], ds["time"].values)
     for k in outputs(ds):
@@ -105,7 +105,7 @@ def test_granules_vtu_round_trip(runs, solid):
 
 def test_granules_xdmf_round_trip(runs):
     ds, folder = runs["plate"]
-    system = model_of(ds)[1]
+    system = result_system(ds)
     with meshio.xdmf.TimeSeriesReader(folder / "granules.xdmf") as r:
         points, _ = r.read_points_cells()
         close(points[:, 0], ds["x"].values[0])
@@ -139,7 +139,7 @@ def read_extxyz(path):
 
 def test_extxyz_round_trip(runs):
     ds, folder = runs["plate"]
-    system = model_of(ds)[1]
+    system = result_system(ds)
     frames = read_extxyz(folder / "granules.extxyz")
     assert len(frames) == ds.sizes["time"]
     for k in outputs(ds):
@@ -257,10 +257,10 @@ def test_solid_stress_round_trip(runs, solid, names):
     """The stress read back from the VTU series and the XDMF file equals `solid_stress` on the
     movies' reconstruction of the same output."""
     ds, folder = runs[solid]
-    sc, _, model = model_of(ds)
+    model = result_solid(ds)
     ks = solid_outputs(ds)
     Q, _ = solid_states(ds, ds["solid_time"].values[ks])
-    want = [solid_stress(model, *elastic_constants(sc), model.T @ q) for q in Q]
+    want = [solid_stress(model, *elastic_constants(model), model.T @ q) for q in Q]
     assert max(np.abs(w[names[0]]).max() for w in want) > 0  # the shock has loaded the solid
     entries = pvd_entries(folder / "solid.pvd")
     with meshio.xdmf.TimeSeriesReader(folder / "solid.xdmf") as r:

@@ -194,7 +194,7 @@ def test_a_constant_load_enters_the_safe_step():
     bounds = []
     for F in (1e3, 1e4, 1e5):
         sc = S.load("paper", ['solid.kind="rigid"', 'excitations.0.kind="constant"', f"excitations.0.value={F}"])
-        system = sc._built[1]
+        system = S.build_granular(sc, sc.base)[0]
         bounds.append(safe_time_step(system, system.excitations, 0.0))
     assert np.all(np.isfinite(bounds))
     assert np.allclose(np.array(bounds[1:]) / bounds[:-1], 10 ** (-1 / 6), rtol=0.02)

@@ -896,8 +896,8 @@ def export(
     the granules at every output and the plate's or beam's nodal displacement, velocity, element
     energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
     stored solid output."""
+    from .analysis.result_model import result_solid
     from .viz.export import ExportError, count_steps, export_result, parse_formats, read_export_result
-    from .viz.figures import model_of
 
     try:
         formats = parse_formats(format_)
@@ -914,7 +914,7 @@ def export(
         _fail(str(e), e.code)
     _check_folder(out, "-o", "export", inputs=[result], recognise=lambda p: any(p.glob("*.pvd")) or
                   (p / "traces.csv").exists())
-    total = count_steps(ds, model_of(ds)[2], formats)
+    total = count_steps(ds, result_solid(ds, result), formats)
     try:
         with Progress(TextColumn("[bold]export"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                       TimeElapsedColumn(), console=console, transient=True) as bar:

@@ -1,13 +1,13 @@
 """Scenario -> built problem -> solver -> driver -> trajectory -> result Dataset, and the run summary.
 
 This is the one place that knows both the scenario and the solvers: below it, solvers receive
-built objects (`problem.Problem`); above it, figures and analysis read result Datasets (and
-rebuild the models of a result through `built_from_result`).
+built objects (`problem.Problem`); above it, figures and analysis read result Datasets and the
+model record each carries (`io.model`). Results of an earlier granel, without a record, get one
+here from their stored scenario (`legacy_model_record`).
 May import: scenario, problem, coupling, solid, granular, io, guard."""
 
 from __future__ import annotations
 
-import functools
 import tomllib
 from pathlib import Path
 
@@ -69,7 +69,6 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     if problem.inputs:
         attrs["input_files"] = encode(problem.inputs)
         attrs["input_texts"] = encode(problem.input_texts)
-    attrs.update(solid_kind=solid.kind, solid_dofs=int(solid.ndof), solid_elements=int(solid.nelements))
     attrs.update(problem.equilibrium or {})
     omega = solver.modes.omega if solver.modes is not None else None
     spec = trajectory_spec(traj, problem.system, solid, attrs, omega)
@@ -89,85 +88,82 @@ def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, ma
     return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
 
 
-@functools.lru_cache(maxsize=8)
-def _built_from_text(scenario_toml: str, texts_json: str = "{}"):
-    """(Scenario, GranularSystem, SolidModel) of a stored scenario, with the texts of the files it
-    refers to (a result's `input_texts`) written to a private folder, so that it rebuilds
-    wherever the result is read."""
-    import tempfile
-
-    from .guard.fingerprints import decode
-
-    raw = tomllib.loads(scenario_toml)
-    texts = decode(texts_json)
-    if texts:
-        import atexit
-        import shutil
-
-        folder = Path(tempfile.mkdtemp(prefix="granel-inputs-"))
-        atexit.register(shutil.rmtree, folder, True)
-        raw = S.with_input_texts(raw, texts, folder)
-    sc = S.validate(raw)
-    problem = S.build_problem(sc)
-    return sc, problem.system, problem.solid
-
-
 def built_models(sc: S.Scenario):
-    """(GranularSystem, SolidModel) of a scenario, for drawings."""
+    """(GranularSystem, SolidModel) of a scenario, for drawings of the scenario (not of a result:
+    a result carries its model, `io.model`)."""
     problem = S.build_problem(sc)
     return problem.system, problem.solid
 
 
-def built_from_result(ds):
-    """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
-    return _built_from_text(ds.attrs["scenario"], str(ds.attrs.get("input_texts", "{}")))
+def legacy_model_record(ds):
+    """The model record (`io.model.ResultModel`) of a result written by a granel that did not
+    store one, built from its stored scenario, with the texts of the files it refers to (its
+    `input_texts`) written to a private folder. The migration of such results, and the one place
+    where a result's scenario is built."""
+    import shutil
+    import tempfile
+
+    from .guard.fingerprints import decode
+    from .io.model import model_record
+
+    raw = tomllib.loads(ds.attrs["scenario"])
+    texts = decode(str(ds.attrs.get("input_texts", "{}")))
+    folder = Path(tempfile.mkdtemp(prefix="granel-inputs-")) if texts else None
+    try:
+        if texts:
+            raw = S.with_input_texts(raw, texts, folder)
+        problem = S.build_problem(S.validate(raw))
+    finally:
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+    return model_record(problem.system, problem.solid)
+
+
+def with_model_record(ds, name="result"):
+    """The result Dataset `ds` with its model record: as stored, or, for a result of an earlier
+    granel, built once by `legacy_model_record` and added (after `io.model.check_result_model`).
+    ResultFileError (code 2) naming `name` if its scenario cannot be built or does not fit it."""
+    from .io.model import check_result_model, has_record, with_record
+
+    if has_record(ds):
+        return ds
+    try:
+        rec = legacy_model_record(ds)
+    except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
+        raise _bad_scenario(name, e) from None
+    check_result_model(ds, rec, name)
+    return with_record(ds, rec)
+
+
+def _bad_scenario(name, e: Exception):
+    from .io.results import ResultFileError
+
+    lines = str(e).strip().splitlines()
+    return ResultFileError(f"{name}: its scenario attribute is not a valid granel scenario "
+                           f"({type(e).__name__}{': ' + lines[0][:200] if lines else ''})", 2)
 
 
 def load_result(path, what: str = "result file"):
-    """A run's result file, read and checked: its structure (`io.results.check_result_schema`) and
-    its agreement with the scenario it carries (the same granules, contacts, walls and, for an
-    elastic solid, a modal or reduced state of the solid's size). ResultFileError naming the file:
-    code 4 if it cannot be read as NetCDF, 2 if it is not a result or is damaged."""
-    from pathlib import Path
-
+    """A run's result file, read and checked: its structure (`io.results.check_result_schema`), a
+    scenario attribute that is a valid scenario, and the agreement of its variables with the model
+    it carries (`io.model.check_result_model`: the same granules, contacts and walls and, for an
+    elastic solid, a modal or reduced state of the solid's size); a result of an earlier granel
+    gets its model record here (`with_model_record`). ResultFileError naming the file: code 4 if
+    it cannot be read as NetCDF, 2 if it is not a result or is damaged."""
+    from .io.model import check_result_model, has_record, read_record
     from .io.results import ResultFileError, check_result_schema, read_netcdf_or
 
     path = Path(path)
     ds = read_netcdf_or(path, ResultFileError, what)
     check_result_schema(ds, path)
-    check_result_model(ds, path)
-    return ds
-
-
-def check_result_model(ds, name) -> None:
-    """ResultFileError (code 2) unless the result's variables fit the model its scenario builds."""
-    from .io.results import ResultFileError, wall_names
-
+    if not has_record(ds):
+        return with_model_record(ds, path)
     try:
-        _, system, solid = built_from_result(ds)
-    except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
-        lines = str(e).strip().splitlines()
-        raise ResultFileError(f"{name}: its scenario attribute is not a valid granel scenario "
-                              f"({type(e).__name__}{': ' + lines[0][:200] if lines else ''})", 2) from None
-
-    def bad(why):
-        return ResultFileError(f"{name}: damaged result ({why})", 2)
-
-    labels = [str(g) for g in ds["granule"].values]
-    if labels != list(system.labels):
-        raise bad(f"{len(labels)} granules stored, its scenario has {system.n}")
-    if "contact" in ds.dims and [str(c) for c in ds["contact"].values] != [c.name for c in solid.contacts]:
-        raise bad(f"{ds.sizes['contact']} solid contacts stored, its scenario has {len(solid.contacts)}")
-    if "wall" in ds.dims and ds.sizes["wall"] != len(wall_names(system)):
-        raise bad(f"{ds.sizes['wall']} walls stored, its scenario has {len(system.walls)}")
-    if solid.ndof and "solid_time" in ds.dims:
-        if "mode" in ds.dims and ds.sizes["mode"] != solid.ndof:  # all modes: q = Phi eta
-            raise bad(f"{ds.sizes['mode']} modes stored for a solid of {solid.ndof} degrees of freedom")
-        if "dof" in ds.dims and ds.sizes["dof"] != solid.ndof:
-            raise bad(f"a reduced state of {ds.sizes['dof']} degrees of freedom for a solid of {solid.ndof}")
-        for v in ("solid_eta", "solid_eta_dot", "solid_x", "solid_v", "mode_omega"):
-            if v in ds.variables and not np.all(np.isfinite(ds[v].values)):
-                raise bad(f"{v} is not finite")
+        S.Scenario.model_validate(tomllib.loads(ds.attrs["scenario"]))
+    except Exception as e:  # noqa: BLE001 - invalid TOML, invalid fields
+        raise _bad_scenario(path, e) from None
+    check_result_model(ds, read_record(ds, path), path)
+    return ds
 
 
 def summarize(ds) -> dict:

@@ -68,6 +68,21 @@ def text_digest(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def sparse_digest(matrices, key: str = "") -> str:
+    """The SHA-256 of `key` and the CSR arrays (indptr, indices, data) of each sparse matrix, in
+    order, after sorting a CSR matrix's indices in place: a solid's M and K name its mode-cache
+    entries and are named in its result's record."""
+    import numpy as np
+
+    h = hashlib.sha256(key.encode())
+    for A in matrices:
+        A = A.tocsr()
+        A.sort_indices()
+        for arr in (A.indptr, A.indices, A.data):
+            h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()
+
+
 def changed(held: dict, now: dict) -> list[str]:
     """The names whose digest differs between two {name: digest} records (or is in one only)."""
     return sorted(k for k in set(held) | set(now) if held.get(k) != now.get(k))

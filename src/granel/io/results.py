@@ -137,6 +137,18 @@ RESULT_DIMS = {
     "medium": ("granule",), "equilibrium_force": ("equilibrium_contact",),
     "equilibrium_overlap": ("equilibrium_contact",),
 }
+# the variables of the model a result carries (`io.model`)
+RECORD_DIMS = {
+    "granule_radius": ("granule",), "granule_mass": ("granule",), "granule_inertia": ("granule",),
+    "granule_modulus": ("granule",), "granule_poisson": ("granule",), "granule_position0": ("granule", "xy"),
+    "wall_p0": ("wall", "xy"), "wall_p1": ("wall", "xy"), "wall_normal": ("wall", "xy"), "wall_medium": ("wall",),
+    "wall_drive": ("wall", "wall_drive_param"), "contact_granule": ("contact",), "contact_position": ("contact", "xy"),
+    "contact_normal": ("contact", "xy"), "contact_dofs": ("contact", "contact_dof"),
+    "solid_node_position": ("solid_node", "xy"), "solid_element_nodes": ("solid_element", "element_node"),
+}
+RESULT_DIMS.update(RECORD_DIMS)
+# the variables that hold names
+TEXT_VARIABLES = ("medium", "wall_medium")
 # what every result holds, finite at every output
 RESULT_REQUIRED = ("x", "y", "theta", "v_x", "v_y", "omega", "energy_solid", "dissipated_viscous",
                    "dissipated_friction", "input_work", "balance_error")
@@ -161,7 +173,7 @@ def check_result_schema(ds, name) -> None:
     if ds.sizes.get("time", 0) < 1 or ds.sizes.get("granule", 0) < 1:
         raise bad("damaged result (no output time or no granule)")
     for v in RESULT_DIMS:
-        if v in ds.variables and ds[v].dtype.kind not in "fiu" and v != "medium":
+        if v in ds.variables and ds[v].dtype.kind not in "fiu" and v not in TEXT_VARIABLES:
             raise bad(f"damaged result ({v} is not numeric: {ds[v].dtype})")
     for v in RESULT_REQUIRED + ("time",):
         values = np.asarray(ds[v].values, float)
@@ -284,7 +296,9 @@ def trajectory_dataset(traj, system, model, attrs: dict, omega=None):
 
 
 def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
-    """The variables of `trajectory_dataset` as a `ResultSpec`."""
+    """The variables of `trajectory_dataset` as a `ResultSpec`, with the model record (`io.model`)."""
+    from .model import model_record, record_entries  # io.model imports this module
+
     t = traj.times
     r = traj.series
     nt = len(t)
@@ -331,7 +345,9 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
     data.update(_step_variables(traj, t, len(names)))
     if model.ndof:
         data.update(_solid_variables(traj, omega))
-    return ResultSpec(data, coords, attrs)
+    record, record_attrs = record_entries(model_record(system, model))
+    data.update(record)
+    return ResultSpec(data, coords, {**attrs, **record_attrs})
 
 
 def wall_names(system) -> list[str]:

@@ -18,9 +18,9 @@ from ..granular.scales import auto_mode_cutoff, load_kinks, load_scales
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
 from ..granular.materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
 from ..problem import Problem
-from ..solid.base import SolidModel, rigid_solid
-from ..solid.beam import build_beam
-from ..solid.plate import LayerSpec, PlateMesh, build_plate
+from ..solid.base import SolidModel
+from ..solid.plate import PlateMesh
+from ..solid.recipe import RecipeContact, SolidRecipe, build_solid_model
 from .files import to_toml
 from .tables import read_granules_table
 from .schema import ExcitationSpec, Scenario, ScenarioError
@@ -184,16 +184,15 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
 
 
 def check_scenario(sc: Scenario, base: Path | None = None) -> None:
-    """Whole-scenario checks that need the built geometry; the built system is kept on the
-    scenario for `build_problem`. The run's needs are estimated first (`estimate.check_needs`),
-    and again with the built granule count."""
+    """Whole-scenario checks that need the built geometry, on a granular system built for them
+    and then dropped (`build_problem` builds its own). The run's needs are estimated first
+    (`estimate.check_needs`), and again with the built granule count."""
     from .estimate import check_needs
 
     check_needs(sc)
-    system, state, media = build_granular(sc, base)
+    system, _, _ = build_granular(sc, base)
     if any(m.granules_file for m in sc.media):
         check_needs(sc, system.n)
-    sc._built = (to_toml(sc), system, state, media)
     check_geometry(sc, system)
     check_load_overlaps(sc, system)
     check_contact_rates(sc, system)
@@ -333,20 +332,26 @@ def check_times(sim) -> None:
 def build_solid(sc: Scenario, system) -> SolidModel:
     """The scenario's solid; one contact point per granule-solid contact of `system`, in the
     same order (names are the granule labels)."""
+    return build_solid_model(solid_recipe(sc, system))
+
+
+def solid_recipe(sc: Scenario, system) -> SolidRecipe:
+    """What the scenario's solid is built from (`solid.recipe`): a rigid solid for none; only the
+    fields its kind uses (a design's probe tells a field that matters by them)."""
     s = present_solid(sc)
-    if s is None or s.kind == "rigid":
-        return rigid_solid([(c.name, c.point, c.normal) for c in system.solid_contacts])
-    mat = sc.materials[s.material]
-    edges = ["left" if c.normal[0] > 0 else "right" for c in system.solid_contacts]
-    if s.kind == "beam":
-        return build_beam(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.rho,
-                          [(c.name, e, c.point[1]) for c, e in zip(system.solid_contacts, edges)],
-                          s.beam_elements, tuple(s.clamped))
-    mesh = s.mesh
-    layers = [LayerSpec(c.name, e, c.point[1], mesh.layer_fraction * float(system.radius[c.granule]))
-              for c, e in zip(system.solid_contacts, edges)]
-    return build_plate(s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho, layers,
-                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers), tuple(s.clamped))
+    kind = "rigid" if s is None else s.kind
+    layer = 0.0 if kind != "plate" else s.mesh.layer_fraction
+    contacts = tuple(RecipeContact(c.name, c.point, c.normal, layer * float(system.radius[c.granule]))
+                     for c in system.solid_contacts)
+    if kind == "rigid":
+        return SolidRecipe("rigid", contacts)
+    mat, mesh = sc.materials[s.material], s.mesh
+    if kind == "beam":
+        return SolidRecipe("beam", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, rho=mat.rho,
+                           beam_elements=s.beam_elements, clamped=tuple(s.clamped))
+    return SolidRecipe("plate", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho,
+                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers),
+                       clamped=tuple(s.clamped))
 
 
 def solver_settings(sc: Scenario) -> SolverSettings:
@@ -367,11 +372,9 @@ GUARD_ENERGY_FLOOR = 1e-3
 
 
 def build_problem(sc: Scenario) -> Problem:
-    """Everything a solver needs, built once (the granular system from validation is reused)."""
+    """Everything a solver needs, built from the validated scenario."""
     text = to_toml(sc)
-    built = sc._built  # kept by the checks; a copy of the scenario with other fields carries a stale one
-    system, state, _ = built[1:] if built is not None and built[0] == text else build_granular(sc, sc.base)
-    state = type(state)(state.y.copy(), state.t)
+    system, state, _ = build_granular(sc, sc.base)
     try:
         solid = build_solid(sc, system)
     except ValueError as e:  # a contact on a clamped node, layers that overlap, ...

@@ -451,7 +451,6 @@ class Scenario(_Strict):
     excitations: list[ExcitationSpec] = Field(default_factory=list)
     initial_velocities: list[InitialVelocitySpec] = Field(default_factory=list)
     _base: Path | None = PrivateAttr(None)  # directory that relative file paths refer to
-    _built: tuple | None = PrivateAttr(None)  # (system, state, media) built by the checks
 
     @property
     def base(self) -> Path | None:

@@ -40,6 +40,7 @@ class SolidModel:
     element_energies: object = None  # callable(q, v) -> (kinetic (ne,), strain (ne,))
     element_volume: np.ndarray | None = None
     full_displacement: object = None  # callable(q) -> (n_nodes, 2)
+    recipe: object = None  # what it was built from (`solid.recipe.SolidRecipe`), if known
 
     @property
     def ndof(self) -> int:

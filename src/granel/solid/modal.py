@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from ..guard.fingerprints import file_crc32
+from ..guard.fingerprints import file_crc32, sparse_digest
 from .base import SolidModel
 
 
@@ -286,15 +286,12 @@ def _cached(model: SolidModel, prefix: str, key: str, compute, mmap: bool, wante
 
 def _stem(model: SolidModel, prefix: str, key: str) -> Path:
     """The cache entry's path without suffix: a hash of M, K and `key`."""
-    import hashlib
+    return cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{matrix_key(model, key)}"
 
-    h = hashlib.sha256(key.encode())
-    for A in (model.M, model.K):
-        A = A.tocsr()
-        A.sort_indices()
-        for arr in (A.indptr, A.indices, A.data):
-            h.update(np.ascontiguousarray(arr).tobytes())
-    return cache_dir() / f"{prefix}-{model.kind}-{model.ndof}-{h.hexdigest()[:20]}"
+
+def matrix_key(model: SolidModel, key: str = "") -> str:
+    """The hash of M, K (and `key`) that names the solid's mode-cache entries."""
+    return sparse_digest((model.M, model.K), key)[:20]
 
 
 def _from_cache(model: SolidModel, stem: Path, free, wanted, mmap: bool) -> tuple[Modes | None, str | None]:

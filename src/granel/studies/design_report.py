@@ -241,13 +241,14 @@ def modal_accounting(ds, top: int = TOP_MODES) -> dict | None:
 
 
 def _mode_kinds(ds, which: list[int]) -> list[str]:
-    """The kinds of modes `which` (0-based) of a run's solid, rebuilt from its scenario."""
-    from ..run import built_from_result
-    from ..solid.modal import all_modes, classify_modes
+    """The kinds of modes `which` (0-based) of a run's solid, built from its model record."""
+    from ..analysis.result_model import result_modes, result_solid
+    from ..run import with_model_record
+    from ..solid.modal import classify_modes
 
     try:
-        _, _, model = built_from_result(ds)
-        return classify_modes(model, all_modes(model), which)
+        ds = with_model_record(ds)
+        return classify_modes(result_solid(ds), result_modes(ds), which)
     except Exception:  # noqa: BLE001 - a drawing aid: the accounting stands without the kinds
         return ["?"] * len(which)
 

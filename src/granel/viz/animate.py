@@ -31,6 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..analysis.density import granule_energies, granule_states  # noqa: E402
+from ..analysis.result_model import result_modes, result_solid, result_system  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
 from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
 
@@ -80,24 +81,25 @@ def check_movie_options(max_frames=120, fps=20, magnification=None) -> None:
             raise ValueError(f"magnification must be a finite number > 0, got {magnification!r}")
 
 
-# what a movie reads from a result (besides the scenario text in its attributes)
+# what a movie reads from a result (besides its model record and the scenario text in its attributes)
 RESULT_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
 
 
 def read_result(path) -> "xr.Dataset":
-    """A run's result file, read and checked (`run.load_result`); ResultFileError naming the file."""
+    """A run's result file, read and checked (`run.load_result`, which also gives a result of an
+    earlier granel its model record); ResultFileError naming the file."""
     from ..run import load_result
 
     return load_result(path)
 
 
 def check_result(ds, name="result") -> None:
-    """ResultFileError unless `ds` is a granel result that fits the scenario it carries."""
+    """ResultFileError unless `ds` is a granel result that fits the model it carries."""
+    from ..io.model import check_result_model, read_record
     from ..io.results import check_result_schema
-    from ..run import check_result_model
 
     check_result_schema(ds, name)
-    check_result_model(ds, name)
+    check_result_model(ds, read_record(ds, name), name)
 
 
 def _first_line(e: Exception) -> str:
@@ -109,31 +111,14 @@ def _first_line(e: Exception) -> str:
 # 1. what every frame shows
 
 
-_MODES_CACHE: dict = {}
-
-
-def _modes_of(ds, model):
-    """All modes of the solid (cached per process for the last scenario seen: the deformation and
-    energy-density movies of one run share them)."""
-    from ..solid.modal import all_modes
-
-    key = ds.attrs["scenario"]
-    if key not in _MODES_CACHE:
-        _MODES_CACHE.clear()
-        _MODES_CACHE[key] = all_modes(model)
-    return _MODES_CACHE[key]
-
-
 def solid_states(ds, times: np.ndarray, modes=None) -> tuple[np.ndarray, np.ndarray]:
     """The solid's reduced (q, v), shape (len(times), ndof) each, at the stored solid times
     nearest to `times` (`analysis.solid.reduced_states`, modes cached per process)."""
     from ..analysis.solid import reduced_states
-    from .figures import model_of
 
-    model = model_of(ds)[2]
     if modes is None and "solid_eta" in ds:
-        modes = _modes_of(ds, model)
-    return reduced_states(ds, times, model, modes)
+        modes = result_modes(ds)
+    return reduced_states(ds, times, result_solid(ds), modes)
 
 
 @dataclass
@@ -184,16 +169,14 @@ def _limits(ds, system, model) -> tuple[list[float], list[float]]:
 def plan_frames(ds, field: str = "deformation", magnification: float | None = None, max_frames: int = 120) -> FramePlan:
     """Precompute the frames of an Appendix C movie of `ds`: the magnified deformation, or the
     normalised energy density w / w0 of eq. (14) (granules and solid elements)."""
-    from .figures import model_of
-
     _check_field(field)
-    sc, system, model = model_of(ds)
+    system, model = result_system(ds), result_solid(ds)
     times_all = ds["time"].values
     idx = frame_indices(len(times_all), max_frames)
     times = times_all[idx].astype(float)
     xlim, ylim = _limits(ds, system, model)
     has_solid = model.kind in ("plate", "beam") and "solid_time" in ds
-    modes = _modes_of(ds, model) if has_solid and "solid_x" not in ds else None
+    modes = result_modes(ds) if has_solid and "solid_x" not in ds else None
     X, Yp = ds["x"].values[idx], ds["y"].values[idx]
     plan = FramePlan(field, times, np.asarray(system.radius, float), np.stack([X, Yp], axis=-1), tuple(xlim), tuple(ylim),
                      solid_kind=model.kind if has_solid else "rigid", model=model,

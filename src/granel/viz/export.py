@@ -24,12 +24,12 @@ is removed afterwards. The output folder is granel's own (`guard.outputs`): file
 names are replaced; nothing else in the folder is touched.
 
 The solid's nodal fields are rebuilt with the functions the movies use: the solid model from the
-result's scenario text (`figures.model_of`), the reduced state at the stored solid outputs
+result's model record (`analysis.result_model.result_solid`), the reduced state at the stored solid outputs
 (`animate.solid_states`, i.e. `analysis.solid.reduced_states`), the nodal displacement with the
 model's `full_displacement` and the element energy density with `analysis.density.solid_energy_density`.
 
 Stress (cell data, Pa; `solid_stress`, from the full nodal DOF vector x = T q and the Young's
-modulus E and Poisson ratio nu of the solid's material in the result's scenario):
+modulus E and Poisson ratio nu of the solid's material in its recorded recipe):
 
 * plate: ``stress_xx``, ``stress_yy``, ``stress_xy``, the plane-stress Cauchy stress averaged over
   each Q8 element (the area-weighted mean of its values at the 3 x 3 Gauss points of the plate's
@@ -140,12 +140,9 @@ def solid_cells(model) -> list[tuple[str, np.ndarray]]:
     return [(kind, np.asarray(model.elements, dtype=np.int64))]
 
 
-def elastic_constants(sc) -> tuple[float, float]:
-    """(Young's modulus E [Pa], Poisson ratio nu) of the material of scenario `sc`'s solid."""
-    from ..scenario.build import present_solid
-
-    mat = sc.materials[present_solid(sc).material]
-    return float(mat.E), float(mat.nu)
+def elastic_constants(model) -> tuple[float, float]:
+    """(Young's modulus E [Pa], Poisson ratio nu) of a solid's material (from its recipe)."""
+    return float(model.recipe.E), float(model.recipe.nu)
 
 
 def plate_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
@@ -396,17 +393,17 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: C
     """Write the chosen `formats` of result `ds` into folder `out` (created if missing); returns
     the paths written. `tick` is called once per frame or table written (see `count_steps`).
     OSError when the folder cannot be written (what was already moved into place stays)."""
-    from .figures import model_of
+    from ..analysis.result_model import result_solid, result_system
 
     tick = tick or (lambda: None)
     formats = [f for f in FORMATS if f in set(formats)]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    sc, system, model = model_of(ds)
+    system, model = result_system(ds), result_solid(ds)
     from ..guard.resources import check_disk
 
     check_disk(export_size(ds, model, formats), out, f"the export to {out}")
-    elastic = elastic_constants(sc) if has_solid(ds, model) else (0.0, 0.0)
+    elastic = elastic_constants(model) if has_solid(ds, model) else (0.0, 0.0)
     stage = staging_folder(out)
     written = []
     try:

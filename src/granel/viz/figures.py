@@ -16,6 +16,8 @@ from matplotlib.patches import Circle  # noqa: E402
 
 from ..analysis.modal import accumulated_modal_energy, modal_coordinates, modal_energies, time_averaged_accumulation  # noqa: E402
 from ..analysis.reciprocity import directed_velocity, excitation_of  # noqa: E402
+from ..analysis.result_model import result_solid, result_system  # noqa: E402
+from ..io.model import read_record  # noqa: E402
 
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
 
@@ -40,17 +42,10 @@ def scenario_of(ds) -> dict:
     return tomllib.loads(ds.attrs["scenario"])
 
 
-def model_of(ds):
-    """(Scenario, GranularSystem, SolidModel) rebuilt from a result's scenario text."""
-    from ..run import built_from_result
-
-    return built_from_result(ds)
-
-
 def modal_energy_history(ds, modes=None):
     """(solid times, modal energies (nt, nm) of eq. (15), omega) of a run; a solid too large for
     all modes stores the reduced state, projected here on the modes of its model."""
-    t, X, Xd, w = modal_coordinates(ds, modes, model_of(ds)[2] if "solid_x" in ds else None)
+    t, X, Xd, w = modal_coordinates(ds, modes, result_solid(ds) if "solid_x" in ds else None)
     return t, modal_energies(X, Xd, w), w
 
 
@@ -58,7 +53,7 @@ def solid_state_at(ds, time: float, modes=None):
     """The solid's reduced (q, v) at the stored solid time closest to `time`, and its index."""
     from ..analysis.solid import nearest_solid_outputs, reduced_states
 
-    q, v = reduced_states(ds, [time], model_of(ds)[2], modes)
+    q, v = reduced_states(ds, [time], result_solid(ds), modes)
     return q[0], v[0], int(nearest_solid_outputs(ds, [time])[0])
 
 
@@ -168,7 +163,7 @@ def granule_energies_at(ds, k: int, su=None):
     solid contact points displaced by su (nc, 2): `analysis.density.granule_energies` for one frame."""
     from ..analysis.density import granule_energies, granule_states
 
-    system = model_of(ds)[1]
+    system = result_system(ds)
     return granule_energies(system, granule_states(ds, [k]), None if su is None else su[None])[0], system
 
 
@@ -177,7 +172,7 @@ def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=No
     from ..analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
     from .plots import draw_plate
 
-    sc, system, model = model_of(ds)
+    system, model = result_system(ds), result_solid(ds)
     w0 = excited_reference(ds)
     k = int(np.argmin(np.abs(ds["time"].values - time)))
     q, v, _ = solid_state_at(ds, ds["time"].values[k], modes)
@@ -212,13 +207,13 @@ def snapshot_time(ds) -> float:
 def system_extent(ds, margin=0.15):
     """(xlim, ylim) holding every granule, wall and the solid of a run, with a margin relative to
     the largest radius: one frame for every panel of a figure."""
-    sc, system, model = model_of(ds)
-    x, y, r = system.pos0[:, 0], system.pos0[:, 1], system.radius
-    xs = [x.min() - r.max(), x.max() + r.max()] + [p for w in system.walls for p in (w.p0[0], w.p1[0])]
-    ys = [y.min() - r.max(), y.max() + r.max()] + [p for w in system.walls for p in (w.p0[1], w.p1[1])]
-    if model.nodes is not None:
-        xs += [model.nodes[:, 0].min(), model.nodes[:, 0].max()]
-        ys += [model.nodes[:, 1].min(), model.nodes[:, 1].max()]
+    rec = read_record(ds)
+    x, y, r = rec.position0[:, 0], rec.position0[:, 1], rec.radius
+    xs = [x.min() - r.max(), x.max() + r.max()] + [p for w in rec.walls for p in (w.p0[0], w.p1[0])]
+    ys = [y.min() - r.max(), y.max() + r.max()] + [p for w in rec.walls for p in (w.p0[1], w.p1[1])]
+    if rec.nodes is not None:
+        xs += [rec.nodes[:, 0].min(), rec.nodes[:, 0].max()]
+        ys += [rec.nodes[:, 1].min(), rec.nodes[:, 1].max()]
     pad = margin * r.max()
     return (min(xs) - pad, max(xs) + pad), (min(ys) - pad, max(ys) + pad)
 
@@ -263,8 +258,7 @@ def fig5_energy_density(runs: dict, out):
 
 def draw_walls(ax, ds, color="k", lw=2.0):
     """The rigid walls of a run's granular media."""
-    system = model_of(ds)[1]
-    for w in system.walls:
+    for w in read_record(ds).walls:
         ax.plot([w.p0[0], w.p1[0]], [w.p0[1], w.p1[1]], color=color, lw=lw, solid_capstyle="butt")
 
 

@@ -1,0 +1,247 @@
+"""The model a result carries (`ResultModel`): what figures, movies, exports and analysis need of
+the granular system and the solid, written beside the trajectory by `io.results.trajectory_spec`,
+so that nothing downstream runs the scenario builder again.
+
+Granules, walls and solid contacts are variables on the result's own `granule`, `wall` and
+`contact` dimensions; the solid is its recipe (JSON of `solid.recipe.SolidRecipe`, from which
+`solid.recipe.build_solid_model` builds it again), its mesh, and the SHA-256 of its M and K (the
+mode cache names its entries by the first 20 characters). docs/architecture.md, "What a result
+carries", lists the names. `read_record` is the one reader; a result of an earlier granel has no
+record, and `run.load_result` adds one from its scenario."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..guard.fingerprints import sparse_digest
+from .results import RECORD_DIMS, ResultFileError, wall_names
+
+RECORD_VERSION = 1  # the `model_record` attribute: raise when the record's layout changes
+DRIVE_PARAMS = 6  # `granular.loads.WallDrive.params`: amplitude, frequency, t0, duration, phase, ramp cycles
+
+
+@dataclass(frozen=True)
+class WallRecord:
+    """A rigid wall: its label in the result, ends p0 -> p1, unit normal into the granules, the
+    medium it holds ("" for every medium) and, for a shaker, `WallDrive.params` (zeros at rest)."""
+
+    name: str
+    p0: tuple[float, float]
+    p1: tuple[float, float]
+    normal: tuple[float, float]
+    medium: str
+    drive: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class ContactRecord:
+    """A granule-solid contact: its name, granule index, rest position, unit normal n_ik (granule
+    -> solid) and the solid's reduced DOFs of its x, y and rotation (-1: none)."""
+
+    name: str
+    granule: int
+    position: tuple[float, float]
+    normal: tuple[float, float]
+    dofs: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class ResultModel:
+    """The granules (labels, media, built centres, radius, mass, moment of inertia, E, nu), the
+    contact law of eqs. (2)-(5) and the neighbour skin, the walls, the solid contacts, and the
+    solid: kind, reduced DOFs, recipe (JSON), digest of M and K, mesh nodes and elements (None for
+    a rigid solid) and the natural frequencies of the modal coordinates (the result's `mode_omega`;
+    None without)."""
+
+    labels: tuple[str, ...]
+    media: tuple[str, ...]
+    medium_index: np.ndarray
+    position0: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    E: np.ndarray
+    nu: np.ndarray
+    mu: float
+    alpha_n: float
+    k_s: float
+    skin: float
+    walls: tuple[WallRecord, ...]
+    contacts: tuple[ContactRecord, ...]
+    solid_kind: str
+    solid_dofs: int
+    solid_recipe: str
+    solid_digest: str
+    nodes: np.ndarray | None = None
+    elements: np.ndarray | None = None
+    mode_omega: np.ndarray | None = None
+
+    @property
+    def n(self) -> int:
+        return len(self.labels)
+
+
+def model_record(system, solid) -> ResultModel:
+    """The record of a run's `granular.system.GranularSystem` and `solid.base.SolidModel`."""
+    if [c.name for c in system.solid_contacts] != [c.name for c in solid.contacts]:
+        raise ValueError("the granular system's solid contacts and the solid's contact points differ")
+    walls = tuple(WallRecord(label, _pair(w.p0), _pair(w.p1), _pair(w.normal), w.medium,
+                             tuple(float(x) for x in w.drive.params()) if w.drive is not None else (0.0,) * DRIVE_PARAMS)
+                  for label, w in zip(wall_names(system), system.walls))
+    contacts = tuple(ContactRecord(p.name, int(c.granule), _pair(c.point), _pair(c.normal), (p.dof_x, p.dof_y, p.dof_rotation))
+                     for c, p in zip(system.solid_contacts, solid.contacts))
+    recipe = solid.recipe.to_json() if getattr(solid, "recipe", None) is not None else ""
+    law = system.law
+    return ResultModel(
+        tuple(system.labels), tuple(system.media), np.asarray(system.medium_index, np.int64),
+        np.asarray(system.pos0, float).reshape(-1, 2), *(np.asarray(a, float) for a in
+                                                         (system.radius, system.mass, system.inertia, system.E, system.nu)),
+        float(law.mu), float(law.alpha_n), float(law.k_s), float(system.skin), walls, contacts,
+        solid.kind, int(solid.ndof), recipe, sparse_digest((solid.M, solid.K)),
+        None if solid.nodes is None else np.asarray(solid.nodes, float),
+        None if solid.elements is None else np.asarray(solid.elements, np.int64))
+
+
+def _pair(p) -> tuple[float, float]:
+    return float(p[0]), float(p[1])
+
+
+def record_entries(rec: ResultModel) -> tuple[dict, dict]:
+    """(variables as `io.results.ResultSpec` holds them, attributes) of a record; the variables'
+    dimensions are `io.results.RECORD_DIMS`."""
+    nw, nc = len(rec.walls), len(rec.contacts)
+    values = {
+        "granule_radius": (rec.radius, {"units": "m"}),
+        "granule_mass": (rec.mass, {"units": "kg"}),
+        "granule_inertia": (rec.inertia, {"units": "kg m2", "long_name": "moment of inertia"}),
+        "granule_modulus": (rec.E, {"units": "Pa", "long_name": "Young's modulus"}),
+        "granule_poisson": (rec.nu, {"long_name": "Poisson's ratio"}),
+        "granule_position0": (rec.position0, {"units": "m", "long_name": "centre as built (before any static equilibrium)"}),
+        "wall_p0": (np.array([w.p0 for w in rec.walls], float).reshape(nw, 2), {"units": "m"}),
+        "wall_p1": (np.array([w.p1 for w in rec.walls], float).reshape(nw, 2), {"units": "m"}),
+        "wall_normal": (np.array([w.normal for w in rec.walls], float).reshape(nw, 2),
+                        {"long_name": "unit normal into the granules"}),
+        "wall_medium": (np.array([w.medium for w in rec.walls], dtype=object),
+                        {"long_name": "the medium it holds (empty: every medium)"}),
+        "wall_drive": (np.array([w.drive for w in rec.walls], float).reshape(nw, DRIVE_PARAMS),
+                       {"long_name": "shaker motion: amplitude, frequency, t0, duration, phase, ramp cycles (zeros: at rest)"}),
+        "contact_granule": (np.array([c.granule for c in rec.contacts], np.int64), {}),
+        "contact_position": (np.array([c.position for c in rec.contacts], float).reshape(nc, 2),
+                             {"units": "m", "long_name": "rest position on the solid"}),
+        "contact_normal": (np.array([c.normal for c in rec.contacts], float).reshape(nc, 2),
+                           {"long_name": "unit normal n_ik, granule -> solid"}),
+        "contact_dofs": (np.array([c.dofs for c in rec.contacts], np.int64).reshape(nc, 3),
+                         {"long_name": "the solid's reduced DOFs of its x, y and rotation (-1: none)"}),
+    }
+    if rec.nodes is not None:
+        values["solid_node_position"] = (rec.nodes, {"units": "m"})
+        values["solid_element_nodes"] = (rec.elements, {"long_name": "node indices (Q8: corners, then mid-sides)"})
+    data = {name: (RECORD_DIMS[name], v, a) for name, (v, a) in values.items()}
+    attrs = {"model_record": RECORD_VERSION, "model_media": json.dumps(list(rec.media)), "model_granules": rec.n,
+             "model_walls": nw, "model_contacts": nc, "contact_mu": rec.mu, "contact_alpha_n": rec.alpha_n,
+             "contact_k_s": rec.k_s, "granular_skin": rec.skin, "solid_kind": rec.solid_kind,
+             "solid_dofs": rec.solid_dofs, "solid_elements": 0 if rec.elements is None else len(rec.elements),
+             "solid_recipe": rec.solid_recipe, "solid_matrices_sha256": rec.solid_digest}
+    return data, attrs
+
+
+def has_record(ds) -> bool:
+    return "model_record" in ds.attrs
+
+
+def with_record(ds, rec: ResultModel):
+    """The xarray Dataset `ds` with the record's variables and attributes added."""
+    data, attrs = record_entries(rec)
+    out = ds.assign({name: (dims, values, a) for name, (dims, values, a) in data.items()})
+    out.attrs.update(attrs)
+    return out
+
+
+def read_record(ds, name="result") -> ResultModel:
+    """The model record of a result Dataset. ResultFileError (code 2) naming `name` for a result
+    without one (a result of an earlier granel: `run.load_result` adds it) or with a damaged one."""
+    def bad(why):
+        return ResultFileError(f"{name}: damaged result (its model record: {why})", 2)
+
+    if not has_record(ds):
+        raise ResultFileError(f"{name}: no model record (a result of granel before it stored its model); read it with "
+                              "granel.run.load_result, which builds the record from its scenario", 2)
+    attrs = ds.attrs
+    if str(attrs["model_record"]) != str(RECORD_VERSION):
+        raise bad(f"version {attrs['model_record']}, this granel reads {RECORD_VERSION}")
+    mesh = ("solid_node_position", "solid_element_nodes")  # a rigid solid has none
+    missing = [v for v in RECORD_DIMS if v not in ds.variables and (v not in mesh or any(m in ds.variables for m in mesh))]
+    if missing:
+        raise bad(f"no {', '.join(missing)}")
+    for v in RECORD_DIMS:
+        if v not in ds.variables or ds[v].dtype.kind != "f":
+            continue
+        values = ds[v].values
+        if np.isnan(values).any() or (v != "wall_drive" and not np.isfinite(values).all()):  # a shaker may run forever
+            raise bad(f"{v} is not finite")
+    try:
+        media = tuple(str(m) for m in json.loads(attrs["model_media"]))
+        counts = {d: int(attrs[f"model_{d}s"]) for d in ("granule", "wall", "contact")}
+        law = [float(attrs[k]) for k in ("contact_mu", "contact_alpha_n", "contact_k_s", "granular_skin")]
+        kind, dofs = str(attrs["solid_kind"]), int(attrs["solid_dofs"])
+        recipe, digest = str(attrs["solid_recipe"]), str(attrs["solid_matrices_sha256"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise bad(f"attribute {e}") from None
+    for d, count in counts.items():
+        if ds.sizes.get(d, 0) != count:
+            raise bad(f"{ds.sizes.get(d, 0)} {d}s stored, its model has {count}")
+    for v in ("granule_radius", "granule_mass", "granule_inertia", "granule_modulus"):
+        if not np.all(np.asarray(ds[v].values, float) > 0):
+            raise bad(f"{v} is not positive")
+    labels = tuple(str(g) for g in ds["granule"].values)
+    names = [str(m) for m in ds["medium"].values]
+    if any(m not in media for m in names):
+        raise bad(f"a granule's medium is not one of {list(media)}")
+    n = counts["granule"]
+    granule = np.asarray(ds["contact_granule"].values, np.int64)
+    cdofs = np.asarray(ds["contact_dofs"].values, np.int64).reshape(-1, 3)
+    if np.any((granule < 0) | (granule >= n)) or np.any((cdofs < -1) | (cdofs >= dofs)):
+        raise bad("a contact's granule or DOF is out of range")
+    f = lambda v: np.asarray(ds[v].values, float)  # noqa: E731
+    walls = tuple(WallRecord(str(lab), tuple(p0), tuple(p1), tuple(nrm), str(m), tuple(float(x) for x in d))
+                  for lab, p0, p1, nrm, m, d in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"), f("wall_normal"),
+                                                    ds["wall_medium"].values, f("wall_drive")))
+    contacts = tuple(ContactRecord(str(lab), int(g), tuple(p), tuple(nrm), tuple(int(x) for x in d))
+                     for lab, g, p, nrm, d in zip(ds["contact"].values, granule, f("contact_position"), f("contact_normal"),
+                                                  cdofs))
+    nodes = elements = None
+    if mesh[0] in ds.variables:
+        nodes, elements = f("solid_node_position"), np.asarray(ds["solid_element_nodes"].values, np.int64)
+        if elements.size and (elements.min() < 0 or elements.max() >= len(nodes)):
+            raise bad("an element's node is out of range")
+    omega = f("mode_omega") if "mode_omega" in ds.variables else None
+    return ResultModel(labels, media, np.array([media.index(m) for m in names], np.int64), f("granule_position0"),
+                       f("granule_radius"), f("granule_mass"), f("granule_inertia"), f("granule_modulus"),
+                       f("granule_poisson"), *law, walls, contacts, kind, dofs, recipe, digest, nodes, elements, omega)
+
+
+def check_result_model(ds, rec: ResultModel, name) -> None:
+    """ResultFileError (code 2) naming `name` unless the result's variables fit its model: the
+    same granules, solid contacts and walls, and, for an elastic solid, a modal or reduced state
+    of the solid's size with finite values."""
+    def bad(why):
+        return ResultFileError(f"{name}: damaged result ({why})", 2)
+
+    labels = [str(g) for g in ds["granule"].values]
+    if labels != list(rec.labels):
+        raise bad(f"{len(labels)} granules stored, its model has {rec.n}")
+    if "contact" in ds.dims and [str(c) for c in ds["contact"].values] != [c.name for c in rec.contacts]:
+        raise bad(f"{ds.sizes['contact']} solid contacts stored, its model has {len(rec.contacts)}")
+    if "wall" in ds.dims and ds.sizes["wall"] != len(rec.walls):
+        raise bad(f"{ds.sizes['wall']} walls stored, its model has {len(rec.walls)}")
+    if rec.solid_dofs and "solid_time" in ds.dims:
+        if "mode" in ds.dims and ds.sizes["mode"] != rec.solid_dofs:  # all modes: q = Phi eta
+            raise bad(f"{ds.sizes['mode']} modes stored for a solid of {rec.solid_dofs} degrees of freedom")
+        if "dof" in ds.dims and ds.sizes["dof"] != rec.solid_dofs:
+            raise bad(f"a reduced state of {ds.sizes['dof']} degrees of freedom for a solid of {rec.solid_dofs}")
+        for v in ("solid_eta", "solid_eta_dot", "solid_x", "solid_v", "mode_omega"):
+            if v in ds.variables and not np.all(np.isfinite(ds[v].values)):
+                raise bad(f"{v} is not finite")

@@ -1,0 +1,86 @@
+"""What a solid is built from: its kind, geometry, material, mesh, clamping and contact points
+(`SolidRecipe`), and the one function that builds it (`build_solid_model`). The scenario builder
+writes a recipe; a result stores it as JSON, so that its solid is built again without the scenario
+(the plate's assembly and the modes then come from their disk caches)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+
+from .base import SolidModel, rigid_solid
+from .beam import build_beam
+from .plate import LayerSpec, PlateMesh, build_plate
+
+
+@dataclass(frozen=True)
+class RecipeContact:
+    """A contact point: its name (the granule's label), rest position, unit normal n_ik (granule ->
+    solid; +x on the left face) and, on a plate, the length of its rigid layer."""
+
+    name: str
+    position: tuple[float, float]
+    normal: tuple[float, float]
+    layer: float = 0.0
+
+    @property
+    def edge(self) -> str:
+        return "left" if self.normal[0] > 0 else "right"
+
+
+@dataclass(frozen=True)
+class SolidRecipe:
+    """The arguments of `solid.plate.build_plate`, `solid.beam.build_beam` or
+    `solid.base.rigid_solid` (kind "plate", "beam" or "rigid"): the rectangle x0, y0, width, length
+    and the out-of-plane thickness [m], Young's modulus E [Pa], Poisson's ratio nu, density rho
+    [kg/m^3], the contacts, the plate's mesh, the beam's element count and the clamped ends
+    (bottom, top). Fields a kind does not use keep their defaults."""
+
+    kind: str
+    contacts: tuple[RecipeContact, ...] = ()
+    x0: float = 0.0
+    y0: float = 0.0
+    width: float = 0.0
+    length: float = 0.0
+    thickness: float = 0.0
+    E: float = 0.0
+    nu: float = 0.0
+    rho: float = 0.0
+    mesh: PlateMesh = field(default_factory=PlateMesh)
+    beam_elements: int = 0
+    clamped: tuple[bool, bool] = (True, True)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> "SolidRecipe":
+        """The recipe of `to_json`; ValueError (or KeyError, TypeError) for text that is not one."""
+        d = json.loads(text)
+        contacts = tuple(RecipeContact(str(c["name"]), (float(c["position"][0]), float(c["position"][1])),
+                                       (float(c["normal"][0]), float(c["normal"][1])), float(c["layer"]))
+                         for c in d.pop("contacts"))
+        m = d.pop("mesh")
+        mesh = PlateMesh(int(m["nx"]), float(m["growth"]), float(m["max_size"]), float(m["x_growth"]),
+                         bool(m["rigid_layers"]))
+        clamped = tuple(bool(c) for c in d.pop("clamped"))
+        kind, elements = str(d.pop("kind")), int(d.pop("beam_elements"))
+        return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, **{k: float(v) for k, v in d.items()})
+
+
+def build_solid_model(recipe: SolidRecipe) -> SolidModel:
+    """The solid of a recipe, carrying it (`SolidModel.recipe`); ValueError from the builders (a
+    beam contact off a node or on a clamped one, layers that overlap, ...)."""
+    r = recipe
+    if r.kind == "rigid":
+        model = rigid_solid([(c.name, c.position, c.normal) for c in r.contacts])
+    elif r.kind == "beam":
+        model = build_beam(r.x0, r.y0, r.width, r.length, r.thickness, r.E, r.rho,
+                           [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements, r.clamped)
+    elif r.kind == "plate":
+        layers = [LayerSpec(c.name, c.edge, c.position[1], c.layer) for c in r.contacts]
+        model = build_plate(r.x0, r.y0, r.width, r.length, r.thickness, r.E, r.nu, r.rho, layers, r.mesh, r.clamped)
+    else:
+        raise ValueError(f"unknown solid kind {r.kind!r} (plate, beam or rigid)")
+    model.recipe = recipe
+    return model
