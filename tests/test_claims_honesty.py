@@ -112,15 +112,26 @@ def test_a_statement_expected_by_construction_that_fails_is_counted_as_differ():
 
 
 def test_construction_facts_of_the_paper_scenario():
-    """The symmetry and the solver's bound read from a stored scenario: the paper's shocks on
-    granules 3 and C are on the axis, with or without the outer walls; granule 2 is not."""
+    """The symmetry and the solver's bound read from a result's scenario and model record: the
+    paper's shocks on granules 3 and C are on the axis, with or without the outer walls; granule
+    2 is not."""
+    from granel import scenario as S
+    from granel.io.model import model_record, with_record
+    from granel.io.results import wall_names
     from granel.studies.paper import FREE_EDGE, case_scenario
-    from granel.scenario import to_toml
 
     def ds_of(sc, solver="fast"):
-        t = np.linspace(0, 1e-4, 5)
-        attrs = {"scenario": to_toml(sc), "solver_name": solver, "solver_integrator": "exact", "solver_adaptive": 1}
-        return xr.Dataset({"input_work": ("time", np.linspace(0, 1e-3, 5))}, coords={"time": t}, attrs=attrs)
+        """A result of `sc` at rest, as far as the facts read it."""
+        problem = S.build_problem(sc)
+        system = problem.system
+        t, zero = np.linspace(0, 1e-4, 5), np.zeros((5, system.n))
+        attrs = {"scenario": S.to_toml(sc), "solver_name": solver, "solver_integrator": "exact", "solver_adaptive": 1}
+        ds = xr.Dataset({"input_work": ("time", np.linspace(0, 1e-3, 5)), "v_x": (("time", "granule"), zero),
+                         "v_y": (("time", "granule"), zero), "omega": (("time", "granule"), zero),
+                         "medium": ("granule", np.array([system.media[k] for k in system.medium_index], object))},
+                        coords={"time": t, "granule": list(system.labels), "wall": wall_names(system),
+                                "contact": [c.name for c in problem.solid.contacts]}, attrs=attrs)
+        return with_record(ds, model_record(system, problem.solid))
 
     f = construction_facts(ds_of(case_scenario(("plate", "LSGM:3", "strong"))))
     assert f["mirror_symmetric"] and f["ledger_tol"] == 8e-7 and 8e-7 <= f["balance_bound_rel"] < 1e-3

@@ -127,7 +127,8 @@ def test_harmonic_drive_ramps_up_smoothly_and_stops():
 def test_chirp_instantaneous_frequency(mode):
     """A chirp from f0 to f1: the phase's slope / 2 pi (by central differences) is f0 + (f1 - f0)
     s / D (linear) or f0 (f1 / f0)^(s / D) (log), and the force is A sin(phase) past the ramp."""
-    from granel.granular.loads import chirp, chirp_phase
+    from granel.granular.laws import chirp_phase
+    from granel.granular.loads import chirp
 
     A, f0, f1, D = 2.0, 1e3, 4e4, 2e-3
     c = chirp(A, f0, f1, D, t0=0.0, mode=mode)
@@ -142,29 +143,42 @@ def test_chirp_instantaneous_frequency(mode):
     assert c(D + 1e-9) == 0.0 and c.top_frequency == f1
 
 
+def _drive_reference(A, f0, f1, t0, D, phase, cycles, log, t):
+    """A drive's force written from its definition: A r(s) sin(phi(s)), s = t - t0 in [0, D], the
+    ramp r = (1 - cos(pi x)) / 2 with x = min(s, D - s) f0 / cycles below 1, and phi = 2 pi f0 s +
+    phase (harmonic, f1 = None), or the integral of 2 pi f(s) with f going linearly or
+    geometrically from f0 to f1 (a chirp)."""
+    s = t - t0
+    if s < 0 or s > D:
+        return 0.0
+    x = min(s, D - s) * f0 / cycles if cycles > 0 else 1.0
+    r = 0.5 * (1 - math.cos(math.pi * x)) if x < 1 else 1.0
+    if f1 is None:
+        phi = 2 * math.pi * f0 * s + phase
+    elif log:
+        k = math.log(f1 / f0)
+        phi = 2 * math.pi * f0 * D / k * (math.exp(k * s / D) - 1)
+    else:
+        phi = 2 * math.pi * (f0 * s + (f1 - f0) * s * s / (2 * D))
+    return A * r * math.sin(phi)
+
+
 @pytest.mark.parametrize("kind", ["harmonic", "chirp"])
 def test_compiled_drive_matches_the_reference(kind):
-    """The compiled load (granular.kernels.load_value) against the Python reference at 2,001 times,
-    and a free granule's velocity after the drive against the quadrature of F / m."""
-    from numba import njit
-
+    """A drive's force (the compiled law, `granular.laws.load_force`, which the integrator and
+    `LoadHistory` both call) against its definition written out at 2,001 times (1e-12 of the
+    amplitude: the phase's rounding, 2 pi f t eps), and a free granule's velocity after the
+    drive against the quadrature of F / m."""
     from granel.granular.loads import chirp, harmonic
-    from granel.granular.kernels import load_value
-    from granel.granular.system import load_bundle
 
-    hist = harmonic(5.0, 3e4, t0=2e-6, duration=2e-4, phase=0.3, ramp_cycles=1.5) if kind == "harmonic" else \
-        chirp(5.0, 2e4, 6e4, 2e-4, t0=2e-6, mode="log", ramp_cycles=1.0)
-
-    @njit
-    def values(loads, ts):
-        out = np.empty_like(ts)
-        for k in range(ts.shape[0]):
-            out[k] = load_value(loads, 0, ts[k])
-        return out
-
+    if kind == "harmonic":
+        hist = harmonic(5.0, 3e4, t0=2e-6, duration=2e-4, phase=0.3, ramp_cycles=1.5)
+        ref = lambda t: _drive_reference(5.0, 3e4, None, 2e-6, 2e-4, 0.3, 1.5, False, t)  # noqa: E731
+    else:
+        hist = chirp(5.0, 2e4, 6e4, 2e-4, t0=2e-6, mode="log", ramp_cycles=1.0)
+        ref = lambda t: _drive_reference(5.0, 2e4, 6e4, 2e-6, 2e-4, 0.0, 1.0, True, t)  # noqa: E731
     ts = np.linspace(0, 2.2e-4, 2001)
-    loads = load_bundle([Excitation(0, (1.0, 0.0), hist)])
-    np.testing.assert_allclose(values(loads, ts), [hist(t) for t in ts], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose([hist(t) for t in ts], [ref(t) for t in ts], rtol=0, atol=1e-12 * 5.0)
     R = 0.005
     system = make_system([("a", 0.0, 0.0, R)], excitations=[Excitation(0, (1.0, 0.0), hist)])
     state = initial_state(system)

@@ -189,7 +189,7 @@ def test_a_constant_load_enters_the_safe_step():
     """A sustained load has no finite impulse; the safe step covers it by the period of the contact
     it compresses (2 pi sqrt(m / k), k = 3/2 A delta^(1/2), delta = (F / A)^(2/3)): finite, and
     shorter for a larger force (as F^(-1/6)). Measured: 1.89, 1.29, 0.88 us at 1e3, 1e4, 1e5 N."""
-    from granel.scenario.build import safe_time_step
+    from granel.granular.scales import safe_time_step
 
     bounds = []
     for F in (1e3, 1e4, 1e5):

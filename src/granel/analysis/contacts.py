@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..granular.materials import pair_coefficients
 from ..granular.static import hertz_force_stiffness
-from ..granular.materials import effective_modulus, effective_radius, hertz_coefficient
 
 
 def _pairs(system) -> np.ndarray:
@@ -29,9 +29,8 @@ def peak_pair_force(ds, system) -> float:
     if not len(pairs):
         return 0.0
     i, j = pairs[:, 0], pairs[:, 1]
-    R, E, nu = system.radius, system.E, system.nu
-    A = np.array([hertz_coefficient(effective_modulus(E[a], nu[a], E[b], nu[b]), effective_radius(R[a], R[b]))
-                  for a, b in pairs])
+    R, E, nu, m = system.radius, system.E, system.nu, system.mass
+    A = pair_coefficients(E[i], nu[i], R[i], m[i], E[j], nu[j], R[j], m[j], 0.0)[0]
     x, y = ds["x"].values, ds["y"].values  # (time, granule)
     peak = 0.0
     for start in range(0, x.shape[0], 512):  # blocks of outputs: memory stays at 512 x pairs

@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import functools
 
-from ..granular.loads import WallDrive
+import numpy as np
+
+from ..granular.loads import KIND_CODES, LoadHistory, WallDrive
 from ..granular.packing import Wall
-from ..granular.system import ContactLaw, GranularSystem, SolidContact
+from ..granular.system import ContactLaw, Excitation, GranularSystem, SolidContact
 from ..io.model import read_record
 from ..io.results import ResultFileError
 from ..solid.base import SolidModel, rigid_solid
@@ -18,14 +20,17 @@ from ..solid.recipe import SolidRecipe, build_solid_model
 
 
 def result_system(ds, name="result") -> GranularSystem:
-    """The granular system of a result: granules, contact law, walls and solid contacts (no loads:
-    the result's variables hold what they did)."""
+    """The granular system of a result: granules, contact law, walls, solid contacts and loads."""
     rec = read_record(ds, name)
+    if any(e.kind not in KIND_CODES for e in rec.loads):
+        raise ResultFileError(f"{name}: damaged result (its model record: a load of unknown kind)", 2)
+    loads = [Excitation(e.granule, e.direction, LoadHistory(e.kind, e.params, np.array(e.times), np.array(e.values)))
+             for e in rec.loads]
     walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, WallDrive(*w.drive) if w.drive[1] != 0 else None)
              for w in rec.walls]
     contacts = [SolidContact(c.granule, c.position, c.normal, c.name) for c in rec.contacts]
     return GranularSystem(list(rec.labels), rec.medium_index, list(rec.media), rec.position0, rec.radius, rec.mass,
-                          rec.inertia, rec.E, rec.nu, ContactLaw(rec.mu, rec.alpha_n, rec.k_s), walls, contacts, [],
+                          rec.inertia, rec.E, rec.nu, ContactLaw(rec.mu, rec.alpha_n, rec.k_s), walls, contacts, loads,
                           rec.skin)
 
 

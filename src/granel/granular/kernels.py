@@ -19,6 +19,7 @@ import numpy as np
 from ..guard.jit import njit
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK
 from .contact import contact_law, contact_law_derivatives, hertz_potential
+from .laws import load_force, wall_motion
 
 
 # ---------------------------------------------------------------- geometry of a contact
@@ -89,7 +90,7 @@ def one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
 @njit(cache=True, inline="always")
 def wall_contact(y, model, c, t):
     """Granule-wall candidate c at time t: (touching, fx, fy, torque on the granule, viscous and
-    friction power), by `one_sided_force` against the wall where `wall_motion` puts it (its
+    friction power), by `one_sided_force` against the wall where `laws.wall_motion` puts it (its
     overlap grows by the wall's displacement s, the granule's velocity is taken relative to the
     wall's, s' n). The one law of `rhs` and `wall_forces`."""
     walls, radius = model.walls, model.granules.radius
@@ -98,7 +99,7 @@ def wall_contact(y, model, c, t):
     w = walls.w[c]
     sw = vw = 0.0
     if walls.drive[w, 1] > 0.0:  # a wall at rest skips its motion (for every wall, it made 28 granules 6x slower)
-        sw, vw = wall_motion(walls, w, t)
+        sw, vw = wall_motion(walls.drive[w], t)
     delta = wall_overlap(y, i, w, radius, walls) + sw
     if delta <= 0.0:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0
@@ -120,84 +121,10 @@ def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
 
 
 @njit(cache=True, inline="always")
-def _ramp(s, t_ramp, duration):
-    """`granular.loads.ramp`: the drives' envelope, up over the first t_ramp and down over the last."""
-    if t_ramp <= 0.0:
-        return 1.0
-    x = min(s, duration - s) / t_ramp
-    return 1.0 if x >= 1.0 else 0.5 * (1.0 - math.cos(math.pi * x))
-
-
-@njit(cache=True, inline="always")
-def wall_motion(walls, w, t):
-    """(s, ds/dt): wall w's displacement along its normal at time t and its speed, 0 for a wall
-    at rest; `granular.loads.WallDrive` has the formula and its Python twin."""
-    par = walls.drive[w]
-    f = par[1]
-    tau = t - par[2]
-    if f <= 0.0 or tau < 0.0 or tau > par[3]:
-        return 0.0, 0.0
-    om = 2.0 * math.pi * f
-    t_ramp = par[5] / f
-    r, dr = 1.0, 0.0
-    if t_ramp > 0.0:
-        up = tau <= par[3] - tau
-        x = (tau if up else par[3] - tau) / t_ramp
-        if x < 1.0:
-            r = 0.5 * (1.0 - math.cos(math.pi * x))
-            dr = 0.5 * math.pi / t_ramp * math.sin(math.pi * x) * (1.0 if up else -1.0)
-    arg = om * tau + par[4]
-    return par[0] * r * math.sin(arg), par[0] * (dr * math.sin(arg) + r * om * math.cos(arg))
-
-
-@njit(cache=True, inline="always")
 def load_value(loads, e, t):
-    """F(t) of applied load e: half-sine (fmax, tau, t0), burst (amp, f, t0, cycles), table
-    (linear interpolation, zero outside), constant, harmonic (amp, f, t0, duration, phase,
-    ramp cycles) or chirp (amp, f0, t0, duration, f1, ramp cycles, log); `excitation` has the
-    formulas and a Python twin."""
-    kind = loads.kind[e]
-    par = loads.params[e]
-    if kind == 0:
-        s = t - par[2]
-        if s < 0.0 or s > par[1]:
-            return 0.0
-        return par[0] * math.sin(math.pi * s / par[1])
-    if kind == 1:
-        s = t - par[2]
-        if s < 0.0 or s > par[3] / par[1]:
-            return 0.0
-        return par[0] * math.sin(2.0 * math.pi * par[1] * s)
-    if kind == 2:
-        lo = loads.offset[e]
-        hi = loads.offset[e + 1] - 1
-        tt = loads.tab_t
-        if hi < lo or t < tt[lo] or t > tt[hi]:
-            return 0.0
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if tt[mid] <= t:
-                lo = mid
-            else:
-                hi = mid
-        if hi == lo:
-            return loads.tab_v[lo]
-        w = (t - tt[lo]) / (tt[hi] - tt[lo])
-        return loads.tab_v[lo] * (1.0 - w) + loads.tab_v[hi] * w
-    if kind == 4 or kind == 5:
-        s = t - par[2]
-        if s < 0.0 or s > par[3]:
-            return 0.0
-        f = par[1]
-        if kind == 4:
-            phase = 2.0 * math.pi * f * s + par[4]
-        elif par[6] > 0.5 and par[4] != f:  # a geometric chirp
-            k = math.log(par[4] / f)
-            phase = 2.0 * math.pi * f * par[3] * math.expm1(s / par[3] * k) / k
-        else:
-            phase = 2.0 * math.pi * (f * s + 0.5 * (par[4] - f) * s * s / par[3])
-        return par[0] * _ramp(s, par[5] / f, par[3]) * math.sin(phase)
-    return par[0]
+    """F(t) of applied load e (`laws.load_force` with its parameters and table)."""
+    lo, hi = loads.offset[e], loads.offset[e + 1]
+    return load_force(loads.kind[e], loads.params[e], loads.tab_t[lo:hi], loads.tab_v[lo:hi], t)
 
 
 @njit(cache=True)

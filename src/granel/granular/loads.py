@@ -38,8 +38,14 @@ class LoadHistory:
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     values: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
-    def __call__(self, t):
-        return force_value(KIND_CODES[self.kind], np.asarray(self.params, float), self.times, self.values, t)
+    def __call__(self, t: float) -> float:
+        """F(t) [N], by the compiled law the integrator uses (`granular.laws.load_force`)."""
+        from .laws import load_force  # lazy: numba only where a load is evaluated
+
+        params = np.zeros(LOAD_PARAMS)
+        params[: len(self.params)] = self.params
+        return float(load_force(KIND_CODES[self.kind], params, np.asarray(self.times, float),
+                                np.asarray(self.values, float), float(t)))
 
     @property
     def end_time(self) -> float:
@@ -153,23 +159,6 @@ def chirp(amplitude: float, f0: float, f1: float, duration: float, t0: float = 0
                                  CHIRP_MODES[mode]))
 
 
-def ramp(s: float, t_ramp: float, duration: float = math.inf) -> float:
-    """The drives' envelope at s into them: (1 - cos(pi s / t_ramp)) / 2 for s < t_ramp, the same
-    mirrored over the last t_ramp of a finite duration, 1 between (and for t_ramp = 0)."""
-    if t_ramp <= 0.0:
-        return 1.0
-    x = min(s, duration - s) / t_ramp
-    return 1.0 if x >= 1.0 else 0.5 * (1.0 - math.cos(math.pi * x))
-
-
-def chirp_phase(s: float, f0: float, f1: float, duration: float, log: bool) -> float:
-    """phi(s) of `chirp` (its frequency phi' / 2 pi goes from f0 at s = 0 to f1 at s = duration)."""
-    if log and f1 != f0:
-        k = f1 / f0
-        return 2.0 * math.pi * f0 * duration * math.expm1(s / duration * math.log(k)) / math.log(k)
-    return 2.0 * math.pi * (f0 * s + 0.5 * (f1 - f0) * s * s / duration)
-
-
 def tabulated(times, values) -> LoadHistory:
     """Piecewise-linear F(t) through (times, values); zero outside the table."""
     t = np.asarray(times, float)
@@ -177,36 +166,11 @@ def tabulated(times, values) -> LoadHistory:
     return LoadHistory("table", (), t, v)
 
 
-def force_value(kind: int, params: np.ndarray, times: np.ndarray, values: np.ndarray, t: float) -> float:
-    """Reference (pure Python) evaluation; the compiled twin lives in granular.kernels."""
-    if kind == KIND_HALF_SINE:
-        fmax, tau, t0 = params[0], params[1], params[2]
-        s = t - t0
-        return fmax * math.sin(math.pi * s / tau) if 0.0 <= s <= tau else 0.0
-    if kind == KIND_BURST:
-        amp, f, t0, n = params[0], params[1], params[2], params[3]
-        s = t - t0
-        return amp * math.sin(2.0 * math.pi * f * s) if 0.0 <= s <= n / f else 0.0
-    if kind == KIND_TABLE:
-        if t < times[0] or t > times[-1]:
-            return 0.0
-        return float(np.interp(t, times, values))
-    if kind in (KIND_HARMONIC, KIND_CHIRP):
-        amp, f, t0, dur = params[0], params[1], params[2], params[3]
-        s = t - t0
-        if s < 0.0 or s > dur:
-            return 0.0
-        if kind == KIND_HARMONIC:
-            return amp * ramp(s, params[5] / f, dur) * math.sin(2.0 * math.pi * f * s + params[4])
-        return amp * ramp(s, params[5] / f, dur) * math.sin(chirp_phase(s, f, params[4], dur, params[6] > 0.5))
-    return float(params[0])
-
-
 @dataclass(frozen=True)
 class WallDrive:
     """A rigid wall moved along its normal (into the granular side positive) as a shaker would:
     s(t) = amplitude r(tau) sin(2 pi f tau + phase), tau = t - t0, for 0 <= tau <= duration (the
-    wall at rest before and after), r the drives' ramp (`ramp`, up and down)."""
+    wall at rest before and after), r the drives' ramp (`granular.laws.ramp`, up and down)."""
 
     amplitude: float
     frequency: float
@@ -216,26 +180,17 @@ class WallDrive:
     ramp_cycles: float = 0.0
 
     def params(self) -> tuple[float, ...]:
-        """The compiled kernels' layout (`kernels.wall_motion`)."""
+        """The compiled law's layout (`granular.laws.wall_motion`)."""
         return (float(self.amplitude), float(self.frequency), float(self.t0), float(self.duration), float(self.phase),
                 float(self.ramp_cycles))
 
     def __call__(self, t: float) -> tuple[float, float]:
-        """(s, ds/dt) at time t [m, m/s]."""
-        tau = t - self.t0
-        if not (0.0 <= tau <= self.duration):
-            return 0.0, 0.0
-        w = 2.0 * math.pi * self.frequency
-        t_ramp = self.ramp_cycles / self.frequency
-        r, dr = 1.0, 0.0
-        if t_ramp > 0:
-            up = tau <= self.duration - tau
-            x = (tau if up else self.duration - tau) / t_ramp
-            if x < 1.0:
-                r = 0.5 * (1.0 - math.cos(math.pi * x))
-                dr = 0.5 * math.pi / t_ramp * math.sin(math.pi * x) * (1.0 if up else -1.0)
-        arg = w * tau + self.phase
-        return self.amplitude * r * math.sin(arg), self.amplitude * (dr * math.sin(arg) + r * w * math.cos(arg))
+        """(s, ds/dt) at time t [m, m/s], by the compiled law the integrator uses
+        (`granular.laws.wall_motion`)."""
+        from .laws import wall_motion  # lazy: numba only where a wall's motion is evaluated
+
+        s, v = wall_motion(np.array(self.params()), float(t))
+        return float(s), float(v)
 
     def kinks(self) -> list[float]:
         """Where the motion is not smooth: its start and end, and the ends of its ramps."""

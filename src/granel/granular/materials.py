@@ -1,9 +1,14 @@
-"""Materials and effective contact properties, eq. (4) of the paper."""
+"""Materials and the contact coefficients they give: the effective properties of eq. (4), the
+Hertz coefficient A and the damping prefactor G of eq. (3), for each kind of contact (two
+granules, a granule on a rigid wall, a granule on the solid's massless layer). The functions take
+numbers or numpy arrays alike."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -18,8 +23,13 @@ class Material:
 STEEL = Material(E=200e9, rho=7850.0, nu=0.3)
 
 
-def sphere_mass(radius: float, rho: float) -> float:
-    return 4.0 / 3.0 * math.pi * radius**3 * rho
+def granule_volume(radius):
+    """The volume of a spherical granule, 4/3 pi R^3 (the granules are spheres in a plane)."""
+    return 4.0 / 3.0 * math.pi * radius**3
+
+
+def sphere_mass(radius, rho):
+    return granule_volume(radius) * rho
 
 
 def sphere_inertia(mass: float, radius: float) -> float:
@@ -49,9 +59,9 @@ def effective_mass(m1: float, m2: float | None) -> float:
     return m1 * m2 / (m1 + m2)
 
 
-def hertz_coefficient(E_star: float, R_star: float) -> float:
+def hertz_coefficient(E_star, R_star):
     """A = 4/3 E* sqrt(R*), eq. (3)."""
-    return 4.0 / 3.0 * E_star * math.sqrt(R_star)
+    return 4.0 / 3.0 * E_star * np.sqrt(R_star)
 
 
 def static_overlap(force: float, A: float) -> float:
@@ -65,6 +75,25 @@ def impact_overlap(m_star: float, speed: float, A: float) -> float:
     return (5.0 * m_star * speed * speed / (4.0 * A)) ** 0.4
 
 
-def damping_coefficient(alpha_n: float, m_star: float, A: float) -> float:
+def damping_coefficient(alpha_n, m_star, A):
     """alpha_n sqrt(m* A): gamma = this * delta^(1/4), eq. (3)."""
-    return alpha_n * math.sqrt(m_star * A)
+    return alpha_n * np.sqrt(m_star * A)
+
+
+def pair_coefficients(E1, nu1, R1, m1, E2, nu2, R2, m2, alpha_n):
+    """(A, G) of eq. (3) for two granules, with E*, R* and m* of eq. (4)."""
+    A = hertz_coefficient(effective_modulus(E1, nu1, E2, nu2), effective_radius(R1, R2))
+    return A, damping_coefficient(alpha_n, m1 * m2 / (m1 + m2), A)
+
+
+def wall_coefficients(E, nu, R, m, alpha_n):
+    """(A, G) of eq. (3) for a granule on a rigid, immovable wall: E* = E / (1 - nu^2), R* = R,
+    m* = m."""
+    A = hertz_coefficient(effective_modulus(E, nu), effective_radius(R))
+    return A, damping_coefficient(alpha_n, m, A)
+
+
+def point_coefficient(E, nu, R):
+    """A of eq. (3) for a granule on the solid's massless rigid layer: E* = E / (1 - nu^2), R* =
+    R, and m* = 0, so no damping (G = 0)."""
+    return hertz_coefficient(effective_modulus(E, nu), effective_radius(R))

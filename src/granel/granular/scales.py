@@ -1,13 +1,19 @@
 """The scales of a run, derived once from its built granular system: the speed and energy the
-loads impart, the Hertz contact frequency at the solid (eq. 2) and the automatic mode cut-off
-it sets, and the times where a load or a wall's motion is not smooth."""
+loads impart, the Hertz collision time and contact frequency (eq. 2) and the bounds they set
+(the largest safe step, the automatic mode cut-off), and the times where a load or a wall's
+motion is not smooth."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .materials import impact_overlap
+from .materials import impact_overlap, pair_coefficients, static_overlap, wall_coefficients
 from .system import GranularState, GranularSystem
+
+# a Hertz impact lasts HERTZ_DURATION delta_max / v: 2 (2/5) B(2/5, 1/2)
+HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
 
 # the dropped modes' quasi-static error in the energies, measured on the strong SSGM-side plate
 # case at cut-offs of 0.25-4 MHz: about TRUNCATION_ERROR (f_H / f_cut)^2 of the input
@@ -44,15 +50,62 @@ def load_scales(system: GranularSystem, state: GranularState, duration: float = 
     return max(s for s, _ in scales), max(e for _, e in scales)
 
 
+def collision_time(m_star, speed, A):
+    """The duration of an undamped Hertz impact at closing speed v (eq. 2): HERTZ_DURATION
+    delta_max / v, delta_max its largest overlap (`materials.impact_overlap`)."""
+    return HERTZ_DURATION * impact_overlap(m_star, speed, A) / speed
+
+
+def linear_frequency(m_star, A, delta) -> float:
+    """The frequency [Hz] of small oscillations of a Hertz contact about the overlap delta (eq. 2):
+    sqrt(k / m*) / 2 pi, k = 3/2 A sqrt(delta)."""
+    return float(np.sqrt(1.5 * A * np.sqrt(delta) / m_star)) / (2 * np.pi)
+
+
 def contact_frequency(system: GranularSystem, v_ref: float) -> float:
     """The highest Hertz contact frequency at the solid [Hz]: each solid contact's granule striking
-    it at v_ref, sqrt(k/m) / 2 pi with k = 3/2 A sqrt(delta) at the impact's peak overlap (eq. 2)."""
+    it at v_ref, `linear_frequency` at the impact's peak overlap."""
     best = 0.0
     for c, sc in enumerate(system.solid_contacts):
         m, A = float(system.mass[sc.granule]), float(system.points.A[c])
-        delta = impact_overlap(m, v_ref, A)
-        best = max(best, float(np.sqrt(1.5 * A * np.sqrt(delta) / m)) / (2 * np.pi))
+        best = max(best, linear_frequency(m, A, impact_overlap(m, v_ref, A)))
     return best
+
+
+def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
+    """An upper bound for the RK4 step: 1/20 of the shortest Hertz collision time expected
+    (granule pairs of each size and granule-wall impacts at the largest speed an excitation
+    or an initial velocity can impart, impulse / mass), 1/20 of the period of such a contact
+    compressed by the largest load (constant and tabulated loads included), and 1/10 of the
+    shortest pulse duration."""
+    bounds = []
+    speed = init_speed
+    force = max((e.history.peak() for e in excitations if math.isfinite(e.history.peak())), default=0.0)
+    for e in excitations:
+        m = system.mass[e.granule]
+        J = e.history.peak_impulse()
+        if math.isfinite(J) and J > 0:
+            speed = max(speed, J / m)
+        if e.history.kind == "half_sine":
+            bounds.append(e.history.params[1] / 10.0)
+        elif e.history.top_frequency > 0:
+            bounds.append(1.0 / (e.history.top_frequency * 20.0))
+    for w in system.walls:  # a shaker: its period, and the impacts at its speed
+        if w.drive is not None:
+            bounds.append(1.0 / (w.drive.frequency * 20.0))
+            speed = max(speed, w.drive.peak_speed())
+    if (speed > 0 or force > 0) and system.n:
+        kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
+        for g in np.unique(kinds, axis=0, return_index=True)[1]:
+            E, nu, R, m = system.E[g], system.nu[g], system.radius[g], system.mass[g]
+            pair = float(pair_coefficients(E, nu, R, m, E, nu, R, m, 0.0)[0]), m / 2
+            wall = float(wall_coefficients(E, nu, R, m, 0.0)[0]), m
+            for A, ms in (pair, wall):
+                if speed > 0:
+                    bounds.append(collision_time(ms, speed, A) / 20.0)
+                if force > 0:  # a sustained load: the contact's period about the overlap it compresses to
+                    bounds.append(1.0 / linear_frequency(ms, A, static_overlap(force, A)) / 20.0)
+    return min(bounds) if bounds else math.inf
 
 
 def auto_mode_cutoff(system: GranularSystem, v_ref: float, rtol: float) -> float:

@@ -13,15 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .loads import KIND_CODES, LOAD_PARAMS, LoadHistory
-from .materials import (
-    damping_coefficient,
-    effective_mass,
-    effective_modulus,
-    effective_radius,
-    hertz_coefficient,
-    sphere_inertia,
-    sphere_mass,
-)
+from .materials import pair_coefficients, point_coefficient, sphere_inertia, sphere_mass, wall_coefficients
 from . import kernels
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
     state_size, still
@@ -86,8 +78,7 @@ class GranularSystem:
         g = np.array([c.granule for c in self.solid_contacts], dtype=np.int64)
         nrm = np.array([c.normal for c in self.solid_contacts], float).reshape(nc, 2)
         nrm /= np.maximum(np.hypot(nrm[:, 0], nrm[:, 1]), 1e-300)[:, None]
-        # granule-solid law: rigid massless layer, E* = E/(1-nu^2), R* = R, m* = 0 (no damping)
-        A = np.array([hertz_coefficient(effective_modulus(self.E[k], self.nu[k]), self.radius[k]) for k in g])
+        A = np.asarray(point_coefficient(self.E[g], self.nu[g], self.radius[g]), float).reshape(nc)
         self.points = Points(g, np.array([c.point for c in self.solid_contacts], float).reshape(nc, 2), nrm, A, np.zeros(nc))
         self.loads = load_bundle(self.excitations)
 
@@ -268,11 +259,8 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         i, j = i[order].astype(np.int64), j[order].astype(np.int64)
     else:
         i = j = np.zeros(0, dtype=np.int64)
-    # eq. (4) for both granules' properties, eq. (3)
-    inv_E = (1 - system.nu[i] ** 2) / system.E[i] + (1 - system.nu[j] ** 2) / system.E[j]
-    pA = 4.0 / 3.0 / inv_E * np.sqrt(R[i] * R[j] / (R[i] + R[j]))
-    ms = system.mass[i] * system.mass[j] / (system.mass[i] + system.mass[j])
-    pG = law.alpha_n * np.sqrt(ms * pA)
+    E, nu, m = system.E, system.nu, system.mass
+    pA, pG = pair_coefficients(E[i], nu[i], R[i], m[i], E[j], nu[j], R[j], m[j], law.alpha_n)
     p0, tan, length, nrm, medium, drive = system.wall_geometry
     wg, ww = [], []
     for k in range(len(length)):
@@ -287,9 +275,7 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         wg += idx.tolist()
         ww += [k] * len(idx)
     wg = np.array(wg, dtype=np.int64)
-    # granule-rigid wall: E* = E/(1-nu^2), R* = R, m* = m (eq. 4 with a rigid, immovable partner)
-    wA = np.array([hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), effective_radius(R[g])) for g in wg]).reshape(-1)
-    wG = np.array([damping_coefficient(law.alpha_n, effective_mass(system.mass[g], None), a) for g, a in zip(wg, wA)]).reshape(-1)
+    wA, wG = wall_coefficients(E[wg], nu[wg], R[wg], m[wg], law.alpha_n)
     walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm, drive)
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 

@@ -21,6 +21,7 @@ from .results import RECORD_DIMS, ResultFileError, wall_names
 
 RECORD_VERSION = 1  # the `model_record` attribute: raise when the record's layout changes
 DRIVE_PARAMS = 6  # `granular.loads.WallDrive.params`: amplitude, frequency, t0, duration, phase, ramp cycles
+LOAD_PARAMS = 8  # `granular.loads.LOAD_PARAMS`: a load history's parameters, zero-padded
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,19 @@ class ContactRecord:
     position: tuple[float, float]
     normal: tuple[float, float]
     dofs: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class LoadRecord:
+    """An applied load: its granule index, unit direction, history kind (`granular.loads`) with
+    its parameters (zero-padded to LOAD_PARAMS) and, for a table, its times and values."""
+
+    granule: int
+    direction: tuple[float, float]
+    kind: str
+    params: tuple[float, ...]
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -78,6 +92,7 @@ class ResultModel:
     nodes: np.ndarray | None = None
     elements: np.ndarray | None = None
     mode_omega: np.ndarray | None = None
+    loads: tuple[LoadRecord, ...] = ()
 
     @property
     def n(self) -> int:
@@ -94,6 +109,10 @@ def model_record(system, solid) -> ResultModel:
     contacts = tuple(ContactRecord(p.name, int(c.granule), _pair(c.point), _pair(c.normal), (p.dof_x, p.dof_y, p.dof_rotation))
                      for c, p in zip(system.solid_contacts, solid.contacts))
     recipe = solid.recipe.to_json() if getattr(solid, "recipe", None) is not None else ""
+    loads = tuple(LoadRecord(int(e.granule), _pair(np.asarray(e.direction, float) / np.hypot(*e.direction)), e.history.kind,
+                             tuple(float(x) for x in e.history.params) + (0.0,) * (LOAD_PARAMS - len(e.history.params)),
+                             tuple(float(x) for x in e.history.times), tuple(float(x) for x in e.history.values))
+                  for e in system.excitations)
     law = system.law
     return ResultModel(
         tuple(system.labels), tuple(system.media), np.asarray(system.medium_index, np.int64),
@@ -102,7 +121,7 @@ def model_record(system, solid) -> ResultModel:
         float(law.mu), float(law.alpha_n), float(law.k_s), float(system.skin), walls, contacts,
         solid.kind, int(solid.ndof), recipe, sparse_digest((solid.M, solid.K)),
         None if solid.nodes is None else np.asarray(solid.nodes, float),
-        None if solid.elements is None else np.asarray(solid.elements, np.int64))
+        None if solid.elements is None else np.asarray(solid.elements, np.int64), loads=loads)
 
 
 def _pair(p) -> tuple[float, float]:
@@ -136,12 +155,23 @@ def record_entries(rec: ResultModel) -> tuple[dict, dict]:
         "contact_dofs": (np.array([c.dofs for c in rec.contacts], np.int64).reshape(nc, 3),
                          {"long_name": "the solid's reduced DOFs of its x, y and rotation (-1: none)"}),
     }
+    nl = len(rec.loads)
+    values.update({
+        "load_granule": (np.array([e.granule for e in rec.loads], np.int64), {}),
+        "load_direction": (np.array([e.direction for e in rec.loads], float).reshape(nl, 2), {"long_name": "unit direction"}),
+        "load_kind": (np.array([e.kind for e in rec.loads], dtype=object), {"long_name": "history kind (granular.loads)"}),
+        "load_params": (np.array([e.params for e in rec.loads], float).reshape(nl, LOAD_PARAMS),
+                        {"long_name": "history parameters (granular.loads), zero-padded"}),
+        "load_table_size": (np.array([len(e.times) for e in rec.loads], np.int64), {"long_name": "points of its table"}),
+        "load_table_time": (np.array([t for e in rec.loads for t in e.times], float), {"units": "s"}),
+        "load_table_value": (np.array([v for e in rec.loads for v in e.values], float), {"units": "N"}),
+    })
     if rec.nodes is not None:
         values["solid_node_position"] = (rec.nodes, {"units": "m"})
         values["solid_element_nodes"] = (rec.elements, {"long_name": "node indices (Q8: corners, then mid-sides)"})
     data = {name: (RECORD_DIMS[name], v, a) for name, (v, a) in values.items()}
     attrs = {"model_record": RECORD_VERSION, "model_media": json.dumps(list(rec.media)), "model_granules": rec.n,
-             "model_walls": nw, "model_contacts": nc, "contact_mu": rec.mu, "contact_alpha_n": rec.alpha_n,
+             "model_walls": nw, "model_contacts": nc, "model_loads": nl, "contact_mu": rec.mu, "contact_alpha_n": rec.alpha_n,
              "contact_k_s": rec.k_s, "granular_skin": rec.skin, "solid_kind": rec.solid_kind,
              "solid_dofs": rec.solid_dofs, "solid_elements": 0 if rec.elements is None else len(rec.elements),
              "solid_recipe": rec.solid_recipe, "solid_matrices_sha256": rec.solid_digest}
@@ -180,11 +210,11 @@ def read_record(ds, name="result") -> ResultModel:
         if v not in ds.variables or ds[v].dtype.kind != "f":
             continue
         values = ds[v].values
-        if np.isnan(values).any() or (v != "wall_drive" and not np.isfinite(values).all()):  # a shaker may run forever
+        if np.isnan(values).any() or (v not in ("wall_drive", "load_params") and not np.isfinite(values).all()):  # a drive may run forever
             raise bad(f"{v} is not finite")
     try:
         media = tuple(str(m) for m in json.loads(attrs["model_media"]))
-        counts = {d: int(attrs[f"model_{d}s"]) for d in ("granule", "wall", "contact")}
+        counts = {d: int(attrs[f"model_{d}s"]) for d in ("granule", "wall", "contact", "load")}
         law = [float(attrs[k]) for k in ("contact_mu", "contact_alpha_n", "contact_k_s", "granular_skin")]
         kind, dofs = str(attrs["solid_kind"]), int(attrs["solid_dofs"])
         recipe, digest = str(attrs["solid_recipe"]), str(attrs["solid_matrices_sha256"])
@@ -218,9 +248,26 @@ def read_record(ds, name="result") -> ResultModel:
         if elements.size and (elements.min() < 0 or elements.max() >= len(nodes)):
             raise bad("an element's node is out of range")
     omega = f("mode_omega") if "mode_omega" in ds.variables else None
+    loads = _read_loads(ds, n, bad)
     return ResultModel(labels, media, np.array([media.index(m) for m in names], np.int64), f("granule_position0"),
                        f("granule_radius"), f("granule_mass"), f("granule_inertia"), f("granule_modulus"),
-                       f("granule_poisson"), *law, walls, contacts, kind, dofs, recipe, digest, nodes, elements, omega)
+                       f("granule_poisson"), *law, walls, contacts, kind, dofs, recipe, digest, nodes, elements, omega, loads)
+
+
+def _read_loads(ds, n: int, bad) -> tuple[LoadRecord, ...]:
+    """The record's loads, checked: granules in range, tables that add up."""
+    granule = np.asarray(ds["load_granule"].values, np.int64)
+    sizes = np.asarray(ds["load_table_size"].values, np.int64)
+    times, values = np.asarray(ds["load_table_time"].values, float), np.asarray(ds["load_table_value"].values, float)
+    kinds = [str(k) for k in ds["load_kind"].values]
+    if np.any((granule < 0) | (granule >= n)):
+        raise bad("a load's granule is out of range")
+    if np.any(sizes < 0) or sizes.sum() != len(times) or len(times) != len(values):
+        raise bad("the load tables' sizes do not add up")
+    ends = np.cumsum(sizes)
+    return tuple(LoadRecord(int(g), tuple(d), k, tuple(float(x) for x in par), tuple(times[e - s:e]), tuple(values[e - s:e]))
+                 for g, d, k, par, s, e in zip(granule, np.asarray(ds["load_direction"].values, float), kinds,
+                                               np.asarray(ds["load_params"].values, float), sizes, ends))
 
 
 def check_result_model(ds, rec: ResultModel, name) -> None:

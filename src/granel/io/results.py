@@ -145,10 +145,13 @@ RECORD_DIMS = {
     "wall_drive": ("wall", "wall_drive_param"), "contact_granule": ("contact",), "contact_position": ("contact", "xy"),
     "contact_normal": ("contact", "xy"), "contact_dofs": ("contact", "contact_dof"),
     "solid_node_position": ("solid_node", "xy"), "solid_element_nodes": ("solid_element", "element_node"),
+    "load_granule": ("load",), "load_direction": ("load", "xy"), "load_kind": ("load",),
+    "load_params": ("load", "load_param"), "load_table_size": ("load",), "load_table_time": ("load_table",),
+    "load_table_value": ("load_table",),
 }
 RESULT_DIMS.update(RECORD_DIMS)
 # the variables that hold names
-TEXT_VARIABLES = ("medium", "wall_medium")
+TEXT_VARIABLES = ("medium", "wall_medium", "load_kind")
 # what every result holds, finite at every output
 RESULT_REQUIRED = ("x", "y", "theta", "v_x", "v_y", "omega", "energy_solid", "dissipated_viscous",
                    "dissipated_friction", "input_work", "balance_error")

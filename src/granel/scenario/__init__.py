@@ -9,14 +9,13 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from ..granular.loads import SHOCK_LEVELS  # noqa: F401
+from ..granular.scales import HERTZ_DURATION, safe_time_step  # noqa: F401
 from .build import (  # noqa: F401
-    HERTZ_DURATION,
     build_granular,
     build_media,
     build_problem,
     build_solid,
     check_scenario,
-    safe_time_step,
 )
 from .files import (  # noqa: F401
     _format_validation_error,

@@ -14,9 +14,9 @@ from ..coupling.driver import Guards, Schedule
 from ..coupling.settings import LARGE_SOLID_MODES, SolverSettings
 from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table
 from ..guard.reading import InputFileError
-from ..granular.scales import auto_mode_cutoff, load_kinks, load_scales
+from ..granular.scales import auto_mode_cutoff, load_kinks, load_scales, safe_time_step
 from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
-from ..granular.materials import effective_modulus, hertz_coefficient, impact_overlap, static_overlap
+from ..granular.materials import impact_overlap, pair_coefficients, static_overlap, wall_coefficients
 from ..problem import Problem
 from ..solid.base import SolidModel
 from ..solid.plate import PlateMesh
@@ -25,8 +25,6 @@ from .files import to_toml
 from .tables import read_granules_table
 from .schema import ExcitationSpec, Scenario, ScenarioError
 
-# Hertz impact: contact duration = HERTZ_DURATION * delta_max / v = 2 (2/5) B(2/5, 1/2) delta_max / v
-HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
 
 
 def present_solid(sc: Scenario):
@@ -144,45 +142,6 @@ def build_granular(sc: Scenario, base: Path | None = None):
     return system, initial_state(system, vel, om), media
 
 
-def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
-    """An upper bound for the RK4 step: 1/20 of the shortest Hertz collision time expected
-    (granule pairs of each size and granule-wall impacts at the largest speed an excitation
-    or an initial velocity can impart, impulse / mass), 1/20 of the period of such a contact
-    compressed by the largest load (constant and tabulated loads included), and 1/10 of the
-    shortest pulse duration."""
-    bounds = []
-    speed = init_speed
-    force = max((e.history.peak() for e in excitations if math.isfinite(e.history.peak())), default=0.0)
-    for e in excitations:
-        m = system.mass[e.granule]
-        J = e.history.peak_impulse()
-        if math.isfinite(J) and J > 0:
-            speed = max(speed, J / m)
-        if e.history.kind == "half_sine":
-            bounds.append(e.history.params[1] / 10.0)
-        elif e.history.top_frequency > 0:
-            bounds.append(1.0 / (e.history.top_frequency * 20.0))
-    for w in system.walls:  # a shaker: its period, and the impacts at its speed
-        if w.drive is not None:
-            bounds.append(1.0 / (w.drive.frequency * 20.0))
-            speed = max(speed, w.drive.peak_speed())
-    if (speed > 0 or force > 0) and system.n:
-        kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
-        for g in np.unique(kinds, axis=0, return_index=True)[1]:
-            R, m = system.radius[g], system.mass[g]
-            E2 = effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g])
-            Ew = effective_modulus(system.E[g], system.nu[g])
-            for (Es, Rs, ms) in ((E2, R / 2, m / 2), (Ew, R, m)):
-                A = hertz_coefficient(Es, Rs)
-                if speed > 0:
-                    dmax = impact_overlap(ms, speed, A)
-                    bounds.append(HERTZ_DURATION * dmax / speed / 20.0)
-                if force > 0:  # a sustained load: the contact's period about the overlap it compresses to
-                    delta = static_overlap(force, A)
-                    bounds.append(2.0 * math.pi * math.sqrt(ms / (1.5 * A * math.sqrt(delta))) / 20.0)
-    return min(bounds) if bounds else math.inf
-
-
 def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     """Whole-scenario checks that need the built geometry, on a granular system built for them
     and then dropped (`build_problem` builds its own). The run's needs are estimated first
@@ -229,8 +188,8 @@ def check_geometry(sc: Scenario, system) -> None:
 
 
 def _wall_hertz(system, g) -> float:
-    """A of granule g against a rigid wall (E* = E/(1 - nu^2), R* = R), eq. (3)."""
-    return hertz_coefficient(effective_modulus(system.E[g], system.nu[g]), system.radius[g])
+    """A of granule g against a rigid wall, eq. (3)."""
+    return float(wall_coefficients(system.E[g], system.nu[g], system.radius[g], system.mass[g], 0.0)[0])
 
 
 def check_load_overlaps(sc: Scenario, system) -> None:
@@ -296,10 +255,10 @@ def check_contact_rates(sc: Scenario, system) -> None:
                                 f"sliding at {rate:.2e} 1/s, which needs about {1.5 * rate * dt / 2.0:.1e} RK4 sub-steps "
                                 f"per step dt = {dt:.3e} s (limit {MAX_SUBSTEPS}); lower contact.k_s (the paper: 100 s/m) "
                                 "or simulation.dt")
-        A = hertz_coefficient(effective_modulus(system.E[g], system.nu[g], system.E[g], system.nu[g]), system.radius[g] / 2)
-        ms = m / 2.0
+        A = float(pair_coefficients(system.E[g], system.nu[g], system.radius[g], m, system.E[g], system.nu[g],
+                                    system.radius[g], m, c.alpha_n)[0])
         delta = static_overlap(F, A)
-        decay = c.alpha_n * math.sqrt(A / ms) * delta**0.25
+        decay = c.alpha_n * math.sqrt(A / (m / 2.0)) * delta**0.25
         if decay * dt > RK4_REAL_LIMIT:
             raise ScenarioError(f"contact.alpha_n = {c.alpha_n:g}: at {what} ({F:.3e} N) the contact damping (eq. 3) decays "
                                 f"relative motion at {decay:.2e} 1/s, too fast for RK4 at dt = {dt:.3e} s (rate dt = "

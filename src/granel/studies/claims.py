@@ -128,14 +128,18 @@ def construction_facts(ds) -> dict:
     enforces none: the paper's algorithm, fixed steps, Newmark); `ledger_tol`; and
     `mirror_symmetric` (`_mirror_symmetric`). Without a readable scenario: no guarantee."""
     from .. import scenario as S
+    from ..analysis.result_model import result_system
     from ..granular.scales import load_scales
+    from ..granular.system import initial_state
 
     out = {"balance_bound_rel": float("nan"), "ledger_tol": float("nan"), "mirror_symmetric": False}
     try:
         sc = S.validate(tomllib.loads(str(ds.attrs["scenario"])))
-        system, state, _ = S.build_granular(sc)
+        system = result_system(ds)
     except (KeyError, ValueError, OSError, tomllib.TOMLDecodeError):
         return out
+    first = ds.isel(time=0)
+    state = initial_state(system, np.stack([first["v_x"].values, first["v_y"].values], axis=1), first["omega"].values)
     a = ds.attrs
     if a.get("solver_name") == "fast" and a.get("solver_integrator") == "exact" and int(a.get("solver_adaptive", 0)) == 1:
         w = float(np.abs(ds["input_work"].values).max())

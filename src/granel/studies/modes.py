@@ -96,7 +96,7 @@ class RunMode(StudyMode):
         measured = spec.pair[0] if label == spec.pair[1] else spec.pair[1]
         r = run_metrics(ds, measured)
         metrics = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
-        chain, notes = chain_metrics(scenarios[0][1], ds)
+        chain, notes = chain_metrics(ds)
         return {**metrics, **chain, **force_metrics(scenarios, runs)}, {**r["notes"], **notes}
 
 
@@ -226,19 +226,19 @@ def study_mode(name: str) -> StudyMode:
 # ---------------------------------------------------------------- metrics every mode reports
 
 
-def chain_metrics(sc: S.Scenario, ds) -> tuple[dict[str, float], dict[str, str]]:
+def chain_metrics(ds) -> tuple[dict[str, float], dict[str, str]]:
     """A run's chain metrics and, for each one that is NaN, why: cutoff_Hz, the cut-off of a
     precompressed monatomic chain rung by a pulse (`analysis.narrowband.cutoff_frequency`: its
     highest mode measured in the free response, over the mode's share of the cut-off for the
     chain's ends). A run without a static precompression is NaN at once, its reason noted."""
     from ..analysis.narrowband import CutoffError, cutoff_frequency
-    from ..scenario.build import build_granular
+    from ..analysis.result_model import result_system
 
     try:
         if "equilibrium_contact" not in ds:
             raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant "
                               "load): a cut-off belongs to a precompressed chain")
-        return {"cutoff_Hz": cutoff_frequency(ds, build_granular(sc, sc.base)[0]).cutoff_hz}, {}
+        return {"cutoff_Hz": cutoff_frequency(ds, result_system(ds)).cutoff_hz}, {}
     except CutoffError as e:
         return {"cutoff_Hz": float("nan")}, {"cutoff_Hz": str(e)}
 
@@ -254,11 +254,11 @@ def force_metrics(scenarios: Runs, runs: dict) -> dict[str, float]:
     the first run's scenario) and, per run, peak_contact_force_N and peak_wall_force_N, suffixed
     as `run_suffixes` says."""
     from ..analysis.contacts import design_size, peak_forces  # lazy: its import costs 0.1 s
-    from ..scenario.build import build_granular
+    from ..analysis.result_model import result_system
 
     out: dict[str, float] = {}
-    for k, ((key, sc), suffix) in enumerate(zip(scenarios, run_suffixes([key for key, _ in scenarios]))):
-        system = build_granular(sc, sc.base)[0]
+    for k, ((key, _), suffix) in enumerate(zip(scenarios, run_suffixes([key for key, _ in scenarios]))):
+        system = result_system(runs[key])
         if k == 0:
             out.update(design_size(system))
         peaks = peak_forces(runs[key], system)
