@@ -249,7 +249,7 @@ def test_sparse_newton_path_matches_the_modal_path():
     K + 4 M / dt^2 (or its modes) is good to eps times its condition in the energy norm,
     1 + (w_max dt / 2)^2 (9 here), over 1000 steps (measured 2.3e-13 of the input against 2e-12;
     2.7e-13 with Prescott's kernels)."""
-    from granel.solid.modal import all_modes
+    from granel.solid.mode_cache import all_modes
 
     sc = paper("plate", "SSGM:C", "strong", 'simulation.duration="0.04ms"', 'simulation.integrator="newmark"')
     problem = S.build_problem(sc)

@@ -1,4 +1,4 @@
-"""One computation of a solid's modes at a time (solid.modal._cached): a process that meets a
+"""One computation of a solid's modes at a time (solid.mode_cache.cached_modes): a process that meets a
 set another live process is computing waits for it instead of solving it again, and a lock
 whose holder has died is taken over."""
 
@@ -13,36 +13,36 @@ import numpy as np
 import pytest
 
 from granel.guard.owners import process_token
-from granel.solid import modal
+from granel.solid import mode_cache, modal
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate
 
 
 @pytest.fixture
 def plate(tmp_path, monkeypatch):
     monkeypatch.setenv("GRANEL_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(modal, "LOCK_POLL_S", 0.02)
+    monkeypatch.setattr(mode_cache, "LOCK_POLL_S", 0.02)
     layers = [LayerSpec("a", "left", 0.05, 0.001), LayerSpec("b", "right", 0.04, 0.001)]
     return assemble_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, PlateMesh(2, 2.5, 8e-3))
 
 
 def holder(token: str) -> str:
-    """A lock's text naming the process of `token` as its holder (`modal._lock_text`'s fields)."""
+    """A lock's text naming the process of `token` as its holder (`mode_cache._lock_text`'s fields)."""
     pid = int(token.split("-")[1])
     return json.dumps({"token": token, "host": "here", "pid": pid, "since": time.time(), "what": "test modes"})
 
 
 def test_a_process_waits_for_the_modes_another_is_computing(plate):
-    stem = modal._stem(plate, "modes", "")
+    stem = mode_cache._stem(plate, "modes", "")
     lock = stem.with_suffix(".lock")
     lock.parent.mkdir(parents=True)
     lock.write_text(holder(process_token()))  # a live holder: this process
     got = {}
-    waiter = threading.Thread(target=lambda: got.setdefault("modes", modal.all_modes(plate)))
+    waiter = threading.Thread(target=lambda: got.setdefault("modes", mode_cache.all_modes(plate)))
     waiter.start()
     time.sleep(0.5)
     assert waiter.is_alive() and "modes" not in got  # it waits rather than solve
     modes = modal.modal_analysis(plate)
-    modal._store(plate, stem, modal._scale_free(plate), (float("inf"), None), modes)
+    mode_cache._store(plate, stem, mode_cache._scale_free(plate), (float("inf"), None), modes)
     lock.unlink()  # the holder is done
     waiter.join(30)
     assert not waiter.is_alive()
@@ -53,28 +53,28 @@ def test_a_process_waits_for_the_modes_another_is_computing(plate):
 def test_a_lock_whose_holder_died_is_taken_over(plate):
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    lock = modal._stem(plate, "modes", "").with_suffix(".lock")
+    lock = mode_cache._stem(plate, "modes", "").with_suffix(".lock")
     lock.parent.mkdir(parents=True)
     lock.write_text(holder(process_token(dead.pid)))
-    modes = modal.all_modes(plate)
+    modes = mode_cache.all_modes(plate)
     assert modes.origin == "computed" and not lock.exists()
-    assert modal.all_modes(plate).origin == "cache"
+    assert mode_cache.all_modes(plate).origin == "cache"
 
 
 def test_an_empty_old_lock_is_taken_over(plate):
-    lock = modal._stem(plate, "modes", "").with_suffix(".lock")
+    lock = mode_cache._stem(plate, "modes", "").with_suffix(".lock")
     lock.parent.mkdir(parents=True)
     lock.write_text("")
     old = time.time() - 60
     os.utime(lock, (old, old))
-    assert modal.all_modes(plate).origin == "computed" and not lock.exists()
+    assert mode_cache.all_modes(plate).origin == "computed" and not lock.exists()
 
 
 def test_the_lock_is_released_when_the_solve_fails(plate, monkeypatch):
     def broken(model, count=None):
         raise RuntimeError("no modes today")
 
-    monkeypatch.setattr(modal, "modal_analysis", broken)
+    monkeypatch.setattr(mode_cache, "modal_analysis", broken)
     with pytest.raises(RuntimeError):
-        modal.all_modes(plate)
-    assert not modal._stem(plate, "modes", "").with_suffix(".lock").exists()
+        mode_cache.all_modes(plate)
+    assert not mode_cache._stem(plate, "modes", "").with_suffix(".lock").exists()

@@ -213,7 +213,7 @@ def test_preloaded_medium_starts_at_rest_on_any_solid(solid):
     if solid != "rigid":
         from scipy.sparse.linalg import splu
 
-        from granel.solid.modal import all_modes
+        from granel.solid.mode_cache import all_modes
 
         assert ds["energy_solid"].values[0] > 1e-5  # the solid starts deformed
         omega = all_modes(problem.solid).omega

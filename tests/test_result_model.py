@@ -13,7 +13,7 @@ from granel.analysis.result_model import result_modes, result_solid, result_syst
 from granel.io.model import check_result_model, read_record, record_entries
 from granel.io.results import RECORD_DIMS, ResultFileError, read_netcdf, write_netcdf
 from granel.run import load_result, run_scenario
-from granel.solid.modal import matrix_key
+from granel.solid.mode_cache import matrix_key
 from granel.solid.recipe import SolidRecipe, build_solid_model
 from granel.viz import animate as A
 from granel.viz.export import export_result

@@ -340,7 +340,7 @@ def test_the_cache_is_pruned_oldest_first_and_only_granel_files(tmp_path, monkey
     first, a file named in `keep` never, and a foreign file in the folder is never touched."""
     import os
 
-    from granel.solid.modal import cache_limit, prune_cache
+    from granel.solid.mode_cache import cache_limit, prune_cache
 
     monkeypatch.setenv("GRANEL_CACHE", str(tmp_path))
     names = ["modes-plate-1-a.shapes.npy", "modes-plate-1-a.omega.npy", "plate-b.npz", "modes-below-beam-2-c.shapes.npy",

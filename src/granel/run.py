@@ -17,7 +17,7 @@ from . import scenario as S
 from .io.checkpoint import fingerprint
 from .coupling.driver import drive
 from .problem import Problem
-from .io.results import base_attrs, trajectory_spec
+from .io.run_result import base_attrs, trajectory_spec
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
@@ -27,7 +27,8 @@ def make_solver(problem: Problem, sparse: bool | None = None):
     Newmark (the paper's method, or `integrator = "newmark"`) on all modes, none for a rigid
     solid, or sparse Newmark for solids too large for all modes (`sparse` forces either)."""
     from .coupling.modal import ModalSolver
-    from .solid.modal import DENSE_LIMIT, all_modes, modes_below
+    from .solid.modal import DENSE_LIMIT
+    from .solid.mode_cache import all_modes, modes_below
 
     solid, settings = problem.solid, problem.settings
     large = sparse if sparse is not None else solid.ndof > DENSE_LIMIT

@@ -23,7 +23,7 @@ def modal_coordinates(ds, modes=None, model=None):
     if modes is None:
         if model is None:
             raise ValueError("give `modes` (or `model`) to project a reduced solid state on modes")
-        from ..solid.modal import all_modes
+        from ..solid.mode_cache import all_modes
 
         modes = all_modes(model)
     M = model.M if model is not None else None

@@ -9,13 +9,14 @@ import functools
 
 import numpy as np
 
-from ..granular.loads import KIND_CODES, LoadHistory, WallDrive
+from ..granular.laws import KIND_CODES
+from ..granular.loads import LoadHistory, WallDrive
 from ..granular.packing import Wall
 from ..granular.system import ContactLaw, Excitation, GranularSystem, SolidContact
 from ..io.model import read_record
 from ..io.results import ResultFileError
 from ..solid.base import SolidModel, rigid_solid
-from ..solid.modal import all_modes
+from ..solid.mode_cache import all_modes
 from ..solid.recipe import SolidRecipe, build_solid_model
 
 
@@ -65,7 +66,7 @@ _MODES: dict = {}
 
 
 def result_modes(ds, name="result"):
-    """All modes of a result's solid (`solid.modal.all_modes`, from the disk cache), kept per
+    """All modes of a result's solid (`solid.mode_cache.all_modes`, from the disk cache), kept per
     process for the last solid asked for (a movie's frames and a figure's panels share them)."""
     key = read_record(ds, name).solid_digest
     if key not in _MODES:

@@ -21,7 +21,7 @@ def reduced_states(ds, times, model=None, modes=None) -> tuple[np.ndarray, np.nd
     if "solid_x" in ds:
         return ds["solid_x"].values[k].astype(float), ds["solid_v"].values[k].astype(float)
     if modes is None:
-        from ..solid.modal import all_modes
+        from ..solid.mode_cache import all_modes
 
         modes = all_modes(model)
     phi = modes.shapes

@@ -1,14 +1,24 @@
 """The laws of the applied loads and of a shaker wall's motion, compiled once: the integrator
 evaluates them at every RK4 stage, and `granular.loads` (`LoadHistory`, `WallDrive`) calls the
 same functions from Python. The histories' parameters are laid out as `granular.loads` builds
-them."""
+them (the kind codes and LOAD_PARAMS below)."""
 
 from __future__ import annotations
 
 import math
 
 from ..guard.jit import njit
-from .loads import KIND_BURST, KIND_CHIRP, KIND_HALF_SINE, KIND_HARMONIC, KIND_TABLE
+
+# how a load history is handed to `load_force`: a kind code and up to LOAD_PARAMS parameters
+KIND_HALF_SINE = 0
+KIND_BURST = 1
+KIND_TABLE = 2
+KIND_CONSTANT = 3
+KIND_HARMONIC = 4
+KIND_CHIRP = 5
+KIND_CODES = {"half_sine": KIND_HALF_SINE, "burst": KIND_BURST, "table": KIND_TABLE, "constant": KIND_CONSTANT,
+              "harmonic": KIND_HARMONIC, "chirp": KIND_CHIRP}
+LOAD_PARAMS = 8  # parameter slots per load
 
 
 @njit(cache=True, inline="always")

@@ -17,16 +17,6 @@ import numpy as np
 SHOCK_LEVELS = {"weak": 63.67, "moderate": 318.3, "strong": 1591.6}
 PAPER_TAU = 1.0e-5
 
-KIND_HALF_SINE = 0
-KIND_BURST = 1
-KIND_TABLE = 2
-KIND_CONSTANT = 3
-KIND_HARMONIC = 4
-KIND_CHIRP = 5
-KIND_CODES = {"half_sine": KIND_HALF_SINE, "burst": KIND_BURST, "table": KIND_TABLE, "constant": KIND_CONSTANT,
-              "harmonic": KIND_HARMONIC, "chirp": KIND_CHIRP}
-LOAD_PARAMS = 8  # the compiled loads' parameter slots per load
-CHIRP_MODES = {"linear": 0.0, "log": 1.0}
 
 
 @dataclass(frozen=True)
@@ -40,7 +30,7 @@ class LoadHistory:
 
     def __call__(self, t: float) -> float:
         """F(t) [N], by the compiled law the integrator uses (`granular.laws.load_force`)."""
-        from .laws import load_force  # lazy: numba only where a load is evaluated
+        from .laws import KIND_CODES, LOAD_PARAMS, load_force  # lazy: numba only where a load is evaluated
 
         params = np.zeros(LOAD_PARAMS)
         params[: len(self.params)] = self.params
@@ -156,7 +146,7 @@ def chirp(amplitude: float, f0: float, f1: float, duration: float, t0: float = 0
     (mode "log"), phi = 2 pi f0 D (k^(s / D) - 1) / ln k with k = f1 / f0; r as in `harmonic` (up
     and down), its ramp_cycles counted at f0."""
     return LoadHistory("chirp", (float(amplitude), float(f0), float(t0), float(duration), float(f1), float(ramp_cycles),
-                                 CHIRP_MODES[mode]))
+                                 {"linear": 0.0, "log": 1.0}[mode]))
 
 
 def tabulated(times, values) -> LoadHistory:

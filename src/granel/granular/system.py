@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .loads import KIND_CODES, LOAD_PARAMS, LoadHistory
+from .laws import KIND_CODES, LOAD_PARAMS
+from .loads import LoadHistory
 from .materials import pair_coefficients, point_coefficient, sphere_inertia, sphere_mass, wall_coefficients
 from . import kernels
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
@@ -281,7 +282,7 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
 
 
 def load_bundle(excitations: list[Excitation]) -> Loads:
-    """The applied loads as compiled-kernel arrays (kinds in excitation.KIND_CODES)."""
+    """The applied loads as compiled-kernel arrays (kinds in `laws.KIND_CODES`)."""
     ne = len(excitations)
     direction = np.zeros((ne, 2))
     kind = np.zeros(ne, dtype=np.int64)

@@ -1,5 +1,5 @@
 """The model a result carries (`ResultModel`): what figures, movies, exports and analysis need of
-the granular system and the solid, written beside the trajectory by `io.results.trajectory_spec`,
+the granular system and the solid, written beside the trajectory by `io.run_result.trajectory_spec`,
 so that nothing downstream runs the scenario builder again.
 
 Granules, walls and solid contacts are variables on the result's own `granule`, `wall` and

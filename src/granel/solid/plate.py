@@ -197,9 +197,9 @@ def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[Layer
         if model is None:
             model = assemble_plate(*args)
         if damage:
-            from .modal import _note
+            from .mode_cache import note
 
-            _note(("rebuilt", path), f"cache: {damage}; the plate is built again")
+            note(("rebuilt", path), f"cache: {damage}; the plate is built again")
         _save_plate(path, model, args)
     return model
 
@@ -215,7 +215,7 @@ def _plate_cache_path(args):
     """plate-FAMILY-KEY.npz: KEY by all the arguments, FAMILY by the scale-free ones."""
     import hashlib
 
-    from .modal import cache_dir
+    from .mode_cache import cache_dir
 
     key = hashlib.sha256(repr((PLATE_CACHE_VERSION, args)).encode()).hexdigest()[:24]
     family = hashlib.sha256(repr(_scale_free_args(args)).encode()).hexdigest()[:12]
@@ -224,10 +224,10 @@ def _plate_cache_path(args):
 
 def _save_plate(path, model: SolidModel, args) -> None:
     """The assembled arrays of a plate model into the cache, a checked cache file
-    (`modal._write_checked`); a cache that cannot be written is skipped with a note."""
+    (`mode_cache.write_checked`); a cache that cannot be written is skipped with a note."""
     import json
 
-    from .modal import _unwritable, _write_checked, prune_cache
+    from .mode_cache import prune_cache, unwritable, write_checked
 
     thickness, E, rho = args[4], args[5], args[7]
     arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
@@ -239,10 +239,10 @@ def _save_plate(path, model: SolidModel, args) -> None:
         arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr,
                        f"{name}_shape": np.array(A.shape)})
     try:
-        _write_checked(path, arrays)
+        write_checked(path, arrays)
         prune_cache(keep=(path,))
     except OSError as e:
-        _unwritable(path.parent, e)
+        unwritable(path.parent, e)
 
 
 def _scaled_plate(path, args) -> SolidModel | None:
@@ -250,7 +250,7 @@ def _scaled_plate(path, args) -> SolidModel | None:
     thickness h0, modulus E0 and density rho0: K (E h) / (E0 h0), M (rho h) / (rho0 h0), element
     volumes h / h0; nothing else of the assembly depends on them. None without such a plate; a
     damaged one is removed."""
-    from .modal import _discard
+    from .mode_cache import discard
 
     thickness, E, rho = args[4], args[5], args[7]
     family = path.name.split("-")[1]
@@ -261,7 +261,7 @@ def _scaled_plate(path, args) -> SolidModel | None:
         if model is not None:
             return model
         if damage:
-            _discard([other], damage)
+            discard([other], damage)
     return None
 
 
@@ -272,11 +272,11 @@ def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]
     import json
     import zipfile
 
-    from .modal import _used, _verify
+    from .mode_cache import touch, verify
 
     if not path.exists():
         return None, None
-    damage = _verify(path)
+    damage = verify(path)
     if damage:
         return None, damage
     try:
@@ -298,7 +298,7 @@ def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]
                 volume = volume * (h / h0)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as e:  # matches its record
         return None, f"{path.name} cannot be read ({type(e).__name__})"
-    _used(path)  # recently used: pruned last
+    touch(path)  # recently used: pruned last
     model = CachedPlate("plate", mats["M"], mats["K"], contacts, info, mats["T"], nodes, elements, None, volume, None)
     model.node_dofs = node_dofs
     model.full_displacement = model.full

@@ -219,8 +219,7 @@ def modal_accounting(ds, top: int = TOP_MODES) -> dict | None:
     with their frequency and kind (`solid.modal.classify_modes`), the modes that hold 90 % of it
     (eq. 16), and the solid's peak and time-averaged energy over the input work. None for a run
     without modal coordinates (no solid, a rigid one, or a large solid stored in nodes)."""
-    from ..analysis.modal import (modal_coordinates, modal_energies, modes_for_fraction, time_averaged_accumulation,
-                                 time_averaged_shares)
+    from ..analysis.modal import modal_coordinates, modal_energies, modes_for_fraction, time_averaged_accumulation, time_averaged_shares
     from ..analysis.reciprocity import input_energy
 
     if "solid_eta" not in ds or ds.sizes.get("mode", 0) == 0:

@@ -282,7 +282,8 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's
     scenario (e.g. a shorter duration for a smoke test)."""
     from ..analysis.result_model import result_solid
-    from ..solid.modal import all_modes, classify_modes
+    from ..solid.modal import classify_modes
+    from ..solid.mode_cache import all_modes
 
     t0 = time.perf_counter()
     out = Path(out)
