@@ -98,7 +98,7 @@ def wall_contact(y, model, c, t):
     i = walls.g[c]
     w = walls.w[c]
     sw = vw = 0.0
-    if walls.drive[w, 1] > 0.0:  # a wall at rest skips its motion (for every wall, it made 28 granules 6x slower)
+    if walls.drive[w, 1] > 0.0:  # a wall at rest skips its motion (docs/performance.md, "A regression")
         sw, vw = wall_motion(walls.drive[w], t)
     delta = wall_overlap(y, i, w, radius, walls) + sw
     if delta <= 0.0:

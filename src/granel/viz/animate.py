@@ -41,8 +41,8 @@ FIELDS = ("deformation", "energy-density")
 # colour scale of the energy-density movies: w / w0 of eq. (14) on a log scale
 W_MIN, W_MAX = 1e-6, 1.0
 CMAP = "inferno"
-# x264 speed preset: at the same constant quality (quality=7, CRF 15) 'veryfast' takes about half the
-# encoder time of the default 'medium' for a file about 3 % larger
+# x264 speed preset, faster than the default 'medium' at the same constant quality (quality=7,
+# CRF 15) for a slightly larger file (docs/performance.md)
 X264_PRESET = "veryfast"
 # the largest frame rate a movie may ask for (a GIF shows at most 100 frames per second)
 MAX_FPS = 1000
