@@ -457,8 +457,8 @@ def modal_accept(st, solid, D, h, f, dvec):
 
 @njit(cache=True)
 def contact_accept(st, C, h, a_pred, f):
-    """The contacts' motion after the step by the same algebra as the modes (it stays B Phi eta
-    to round-off): a = a_pred + C f, then the average-acceleration update."""
+    """The contacts' motion after the step by the same algebra as the modes, (A2) (it stays B Phi
+    eta to round-off): a = a_pred + C f, then the average-acceleration update."""
     m2 = f.shape[0]
     for r in range(m2):
         acc = a_pred[r]

@@ -66,9 +66,9 @@ def hertz_potential(A, delta):
 
 @njit(cache=True, inline="always")
 def contact_law_derivatives(A, G, delta, ddelta, vt, mu, k_s):
-    """Partial derivatives of (fn, ft) of `contact_law` with respect to (delta, ddelta, vt):
-    (dfn/ddelta, dfn/dddelta, dft/ddelta, dft/dddelta, dft/dvt). The fn-derivatives of
-    |fn| carry its sign (fn < 0 only under strong separation damping)."""
+    """Partial derivatives of (fn, ft) of `contact_law` (eqs. (2), (3), (5)) with respect to
+    (delta, ddelta, vt): (dfn/ddelta, dfn/dddelta, dft/ddelta, dft/dddelta, dft/dvt). The
+    fn-derivatives of |fn| carry its sign (fn < 0 only under strong separation damping)."""
     q = math.sqrt(math.sqrt(delta))  # delta^(1/4)
     dfn_d = 1.5 * A * math.sqrt(delta) + 0.25 * G * ddelta / (q * q * q)
     dfn_dd = G * q
