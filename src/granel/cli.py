@@ -207,9 +207,9 @@ def _check_run_paths(output: Path, sc, scenario: str, resume: Path | None, check
 
 
 def _without_dask() -> None:
-    """A single run never uses dask, but xarray imports it (and distributed) whenever it checks
-    whether an array is a dask array: about 0.6 s of a short run's fixed cost. Marking dask as
-    absent for this process makes xarray take its no-dask paths."""
+    """Mark dask as absent for this process, so that xarray takes its no-dask paths: a single
+    run never uses dask, but xarray imports it (and distributed) whenever it checks whether an
+    array is a dask array (its cost: docs/performance.md)."""
     if "dask" not in sys.modules and "xarray" not in sys.modules:  # only in a fresh process: xarray caches what it found
         sys.modules["dask"] = None
 

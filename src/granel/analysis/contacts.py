@@ -3,8 +3,8 @@ design constraints read.
 
 Granule-granule forces are not stored in a result; they are rebuilt at the outputs from the
 positions with the elastic Hertz law (eq. 2, F = A delta^(3/2), A of eq. 3 with E* and R* of
-eq. 4), so a peak is the largest sampled one (at 1 us outputs, a 27 us impact's peak is caught
-within 0.2 %). Wall and solid forces are the recorded ones (`wall_force_normal`,
+eq. 4), so a peak is the largest sampled one (docs/performance.md gives how close it comes).
+Wall and solid forces are the recorded ones (`wall_force_normal`,
 `contact_force_normal`, which include the damping of eq. 3).
 """
 

@@ -7,7 +7,7 @@ import numpy as np
 
 
 def excited_reference(ds) -> float:
-    """w0 = 1/2 m v0^2 / V of the excited granule (v0: its peak speed)."""
+    """w0 of eq. (14), 1/2 m v0^2 / V of the excited granule (v0: its peak speed)."""
     from .reciprocity import excitation_of
 
     label, _ = excitation_of(ds)
@@ -25,12 +25,13 @@ def excited_reference(ds) -> float:
 
 
 def granule_energy_density(system, y_state_energies, radius) -> np.ndarray:
-    """Energy per granule volume from per-granule energies (kinetic + rotational + potential)."""
+    """w of eq. (14) per granule: its energy (kinetic + rotational + potential, eq. 11) over its
+    volume."""
     return np.asarray(y_state_energies) / (4 / 3 * np.pi * np.asarray(radius) ** 3)
 
 
 def solid_energy_density(model, q, v) -> np.ndarray:
-    """(kinetic + strain energy) / volume of each element of the solid."""
+    """w of eq. (14) per element of the solid: (kinetic + strain energy) / volume."""
     kin, pot = model.element_energies(q, v)
     return (np.asarray(kin) + np.asarray(pot)) / model.element_volume
 

@@ -41,13 +41,14 @@ def modal_energies(X, Xdot, omega) -> np.ndarray:
 
 
 def accumulated_modal_energy(E: np.ndarray, counts=(6, 100, 1000)) -> dict[int, np.ndarray]:
-    """Sum of the leading N modal energies vs time, for each N (Fig. 7)."""
+    """Sum of the leading N modal energies (eq. 15) vs time, for each N (Fig. 7)."""
     cum = np.cumsum(E, axis=1)
     return {int(n): cum[:, min(n, E.shape[1]) - 1] for n in counts}
 
 
 def time_averaged_shares(E: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Each mode's share of the time-integrated solid energy, int E_n dt / int E dt."""
+    """Each mode's share of the time-integrated solid energy, int E_n dt / int E dt: the terms of
+    eq. (16)."""
     integ = np.trapezoid(E, t, axis=0)
     total = integ.sum()
     return integ / total if total > 0 else np.zeros(E.shape[1])

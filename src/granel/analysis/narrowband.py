@@ -157,14 +157,12 @@ def _chain_matrix(n: int, k_first: float, k_last: float) -> np.ndarray:
 
 
 def chain_mode_factors(n: int, k_first: float = 0.0, k_last: float = 0.0) -> np.ndarray:
-    """The normal modes of a linearised monatomic chain of n beads (mass m, pair stiffness K)
-    whose end beads also press on walls of stiffness k_first K and k_last K (0: a free end), as
-    fractions of the infinite chain's cut-off w_c = 2 sqrt(K / m): sqrt(eig(T) / 4), ascending,
-    with T = tridiag(-1, 2, -1) except its corners 1 + k_first and 1 + k_last (M^-1 K in units
-    of K / m). Closed forms: a free end and a wall of twice the pair stiffness (Hertz: a sphere on
-    a rigid wall of its own material, under the chain's force, is 2^(3/2) times a pair's A, so
-    twice its stiffness) give sin((2j - 1) pi / (4n)), j = 1..n, the top one cos(pi / (4n)); two
-    free ends sin((j - 1) pi / (2n)); walls of the pair stiffness at both ends sin(j pi / (2(n + 1)))."""
+    """The normal-mode frequencies of a linearised monatomic chain of n beads whose end beads
+    also press on walls of stiffness k_first K and k_last K (0: a free end), as fractions of the
+    infinite chain's cut-off w_c = 2 sqrt(K / m): sqrt(eig(T) / 4), ascending (`_chain_matrix`).
+    Closed forms: a free end and a wall of twice the pair stiffness (a Hertz sphere on a rigid
+    wall of its own material) give sin((2j - 1) pi / (4n)), j = 1..n; two free ends
+    sin((j - 1) pi / (2n)); walls of the pair stiffness at both ends sin(j pi / (2(n + 1)))."""
     n = int(n)
     if n < 1:
         raise ValueError(f"a chain needs at least one bead, got {n}")
@@ -315,45 +313,17 @@ def _duration_for(t_first: float, span: float, output_every: float) -> float:
 
 def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 0.1,
                      rtol: float = 1e-3) -> ChainCutoff:
-    """The cut-off frequency of a precompressed monatomic chain, measured from a run in which a
-    pulse (or any transient load) sets it ringing: the frequency of the chain's highest normal
-    mode, found in the free response, over that mode's share of the cut-off for the chain's ends.
+    """The cut-off f_c = (1/pi) sqrt(K / m) of a precompressed monatomic chain, measured from a
+    run in which a transient load sets it ringing: the frequency of the chain's highest normal
+    mode in the free response (`damped_modes` on its modal coordinate) over that mode's factor
+    for the chain's ends (`chain_mode_factors`).
 
-    In a monatomic chain of beads of mass m linked by contacts of stiffness K (Hertz under a
-    preload F0: K = 3/2 A^(2/3) F0^(1/3)), a wave exp(i(n theta - w t)) has w = w_c sin(theta /
-    2), w_c = 2 sqrt(K / m): the pass band ends at f_c = (1/pi) sqrt(K / m), beyond which waves
-    are evanescent. A finite chain of n beads has n modes; the highest sits just below f_c, at
-    f_c cos(pi / (4n)) for a free end and a rigid wall of the chain's material at the other (a
-    sphere on such a wall under F0 has twice the pair stiffness, `chain_mode_factors`).
-
-    What is measured, and from what:
-    * the chain, its order and its ends from the run's equilibrium contacts (`equilibrium_*`:
-      each loaded contact's stiffness 3/2 F / delta, exact for Hertz's law); the pairs must be
-      equally stiff and the beads equally heavy (monatomic), and the ends' wall stiffness over
-      the pairs' sets the mode factor and the mode shapes (the unit eigenvectors of T);
-    * the modal coordinates q_j = phi_j' v of the beads' velocities along the chain after the
-      last transient load (a modal filter: the beads are equally heavy, so the shapes are
-      orthogonal under the mass and each coordinate holds one mode, whatever the spacing of the
-      modes: the top two of n beads are f_c pi^2 / (4 n^2) apart);
-    * each mode's frequency from its coordinate (`damped_modes`, MODE_ORDER exponentials): the
-      strongest oscillation's undamped frequency |s| / 2 pi (for the chain's Tsuji damping,
-      linearised, exactly the undamped eigenfrequency: the dashpots are proportional to the
-      springs, so they neither shift the frequency nor couple the modes).
-
-    The fit checks itself: the top mode is fitted again on the first three quarters of the free
-    response, and one that moves by more than `rtol` between the two (`spread`) is refused; so
-    is one above Gershgorin's bound of the linearised chain, one not excited, and a coordinate
-    whose second oscillation reaches MAX_LEAK of its mode (the motion is not the linearised
-    chain's).
-
-    CutoffError (a ValueError) says why, and which field to change by how much, when the run
-    does not allow it: no precompression (`simulation.equilibrate` with a constant load), loaded
-    contacts that are not one straight monatomic chain, a drive that lasts to the end, outputs too
-    sparse for the chain's highest frequency (2.5 samples a period), a free response with too few
-    samples (SAMPLES_PER_EXPONENTIAL per exponential) or shorter than `min_periods` periods of the
-    top mode, a fit that fails its checks, or contacts whose overlap swings by more than
-    `max_strain` of its static value (not the linear regime). `system` is the run's granular
-    system (`scenario.build.build_granular(sc, sc.base)[0]`)."""
+    The free response must hold `min_periods` periods of the top mode, no contact's overlap may
+    swing by more than `max_strain` of its static value, and the top mode may move by at most
+    `rtol` when the last quarter of the record is left out. CutoffError (a ValueError) says why
+    a run cannot give a cut-off and which field to change. `system` is the run's granular
+    system (`analysis.result_model.result_system(ds)`). docs/design.md ("An inverse problem: a
+    chain's cut-off") gives the method, its checks and its bias."""
     if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
         raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
                           "a cut-off belongs to a precompressed chain")

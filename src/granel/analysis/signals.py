@@ -155,21 +155,15 @@ class DampedModes:
 
 def damped_modes(t, s, order: int, window=None, pencil: int | None = None) -> DampedModes:
     """The damped oscillations of a free response by the matrix pencil method (Hua & Sarkar,
-    IEEE Trans. ASSP 38, 1990): s (samples, or samples x channels, on a uniform grid) is
-    modelled as sum_k c_k z_k^n with `order` complex exponentials z_k = e^(s_k dt) shared by
-    every channel. The Hankel matrices of the channels (`pencil` columns, default a third of the
-    samples), stacked, give the signal space of rank `order` (their leading right singular
-    vectors, from the Gram matrix); the z_k are the eigenvalues of its shift; the c_k follow by
-    least squares. A real oscillation takes two exponentials (a conjugate pair), so a system of
-    N degrees of freedom needs order >= 2N; a larger order absorbs a drift, an offset or weak
-    harmonics, and the extra exponentials come out weak.
+    IEEE Trans. ASSP 38, 1990): s (samples, or samples x channels, on a uniform grid) is modelled
+    as sum_k c_k z_k^n with `order` complex exponentials z_k = e^(s_k dt) shared by every channel;
+    `pencil` is the Hankel matrices' column count (default a third of the samples). A real
+    oscillation takes two exponentials, so N degrees of freedom need order >= 2N; a larger order
+    absorbs a drift, an offset or weak harmonics.
 
-    Unlike a Fourier peak, this is not limited by the record's length (1 / T) nor biased by the
-    damping or by a neighbouring mode's leakage: on a noise-free linear response it returns the
-    modes to round-off. Returns the oscillating modes (Im s_k > 0) with their undamped natural
-    frequency |s_k| / 2 pi: for viscous damping proportional to the stiffness (as the Tsuji
-    damping of a uniformly preloaded chain is, linearised), that is the undamped system's
-    eigenfrequency exactly."""
+    Returns the oscillating modes (Im s_k > 0) with their undamped natural frequency |s_k| / 2 pi,
+    the undamped eigenfrequency exactly for damping proportional to the stiffness (a preloaded
+    chain's linearised Tsuji damping). docs/analysis.md says why not a Fourier peak."""
     t = np.asarray(t, float)
     y = np.asarray(s, float)
     if y.ndim == 1:

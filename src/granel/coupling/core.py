@@ -5,20 +5,17 @@ solver. One accepted step tau_s -> tau_s+1 = tau_s + h:
      common step for all contacts (`step_level`);
   2. the Newmark predictor at the contacts (A1)-(A2): their acceleration at s+1 is
      a_pred + C F, C = B (M + K h^2/4)^-1 B' the contacts' compliance over the step;
-  3. the interface iteration (`interface_solve`): guess F (the previous step's, A1 step 1);
-     contact motion inside the step by the constant average acceleration (A3); RK4 for the
-     granules under it (with sub-steps where friction is stiff); the interface forces G(F) at
-     s+1; repeat until (A4) holds. Strategy: fixed point F <- G(F) as the paper, or Newton on
-     F = G(F) with the contact law's derivatives (the granules' sensitivity neglected, the
-     paper's Assumption 3) and the exact local root for stiff friction;
+  3. the interface iteration (`interface_solve`) from the previous step's F: the contact motion
+     by the constant average acceleration (A3), RK4 for the granules under it, the forces G(F)
+     at s+1, until (A4) holds; by the paper's fixed point F <- G(F), or by Newton with the
+     contact law's derivatives (the paper's Assumption 3) and the exact local root for stiff
+     friction;
   4. accept: Newmark (A2) with the converged forces, the granules' last RK4 state.
 
-The solid runs in mass-normalised modal coordinates with all modes kept (`advance_modal`): Newmark
-is then one scalar recursion per mode, identical to the sparse Newmark (A2) to round-off, and the
-contact compliance is C = P D P' (P = B Phi, D = 1 / (1 + w^2 h^2 / 4)). A rigid solid is the case
-with no modes (C = 0). Solids too large for all modes call `interface_solve` from a Python loop
-around sparse Newmark (`coupling.sparse`).
-"""
+The solid runs in mass-normalised modal coordinates with all modes kept (`advance_modal`): one
+scalar Newmark recursion per mode, C = P D P' (P = B Phi, D = 1 / (1 + w^2 h^2 / 4)); a rigid
+solid has no modes (C = 0). Solids too large for all modes use `coupling.sparse`.
+docs/coupling.md describes the step."""
 
 from __future__ import annotations
 
@@ -457,8 +454,8 @@ def modal_accept(st, solid, D, h, f, dvec):
 
 @njit(cache=True)
 def contact_accept(st, C, h, a_pred, f):
-    """The contacts' motion after the step by the same algebra as the modes (it stays B Phi eta
-    to round-off): a = a_pred + C f, then the average-acceleration update."""
+    """The contacts' motion after the step by the same algebra as the modes, (A2) (it stays B Phi
+    eta to round-off): a = a_pred + C f, then the average-acceleration update."""
     m2 = f.shape[0]
     for r in range(m2):
         acc = a_pred[r]

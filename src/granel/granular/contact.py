@@ -30,10 +30,10 @@ TANH_SATURATED = 19.1
 
 @njit(cache=True, inline="always")
 def tanh(x):
-    """tanh x within 2 ulp (tested against numpy), at about half the cost of the library's: the
-    friction law evaluates it at every contact and RK4 stage. +-1 beyond TANH_SATURATED (most
-    sliding contacts: k_s |v_t| > 19.1); expm1(2x) / (expm1(2x) + 2) for |x| < 1/2 (no
-    cancellation near 0); 1 - 2 / (e^(2|x|) + 1) with the sign of x between."""
+    """tanh x within 2 ulp (tested against numpy), cheaper than the library's, for the friction
+    law (eq. 5) at every contact and RK4 stage: +-1 beyond TANH_SATURATED; expm1(2x) /
+    (expm1(2x) + 2) for |x| < 1/2 (no cancellation near 0); 1 - 2 / (e^(2|x|) + 1) with the sign
+    of x between."""
     ax = abs(x)
     if ax > TANH_SATURATED:
         return 1.0 if x > 0.0 else -1.0
@@ -66,9 +66,9 @@ def hertz_potential(A, delta):
 
 @njit(cache=True, inline="always")
 def contact_law_derivatives(A, G, delta, ddelta, vt, mu, k_s):
-    """Partial derivatives of (fn, ft) of `contact_law` with respect to (delta, ddelta, vt):
-    (dfn/ddelta, dfn/dddelta, dft/ddelta, dft/dddelta, dft/dvt). The fn-derivatives of
-    |fn| carry its sign (fn < 0 only under strong separation damping)."""
+    """Partial derivatives of (fn, ft) of `contact_law` (eqs. (2), (3), (5)) with respect to
+    (delta, ddelta, vt): (dfn/ddelta, dfn/dddelta, dft/ddelta, dft/dddelta, dft/dvt). The
+    fn-derivatives of |fn| carry its sign (fn < 0 only under strong separation damping)."""
     q = math.sqrt(math.sqrt(delta))  # delta^(1/4)
     dfn_d = 1.5 * A * math.sqrt(delta) + 0.25 * G * ddelta / (q * q * q)
     dfn_dd = G * q

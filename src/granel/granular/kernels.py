@@ -27,7 +27,7 @@ from .laws import load_force, wall_motion
 
 @njit(cache=True, inline="always")
 def pair_overlap(y, i, j, radius):
-    """(dx, dy, distance, overlap delta) of granules i and j."""
+    """(dx, dy, distance, overlap delta of eq. (2)) of granules i and j."""
     dx = y[2 * j] - y[2 * i]
     dyy = y[2 * j + 1] - y[2 * i + 1]
     dist = math.sqrt(dx * dx + dyy * dyy)
@@ -36,7 +36,8 @@ def pair_overlap(y, i, j, radius):
 
 @njit(cache=True, inline="always")
 def wall_overlap(y, i, w, radius, walls):
-    """Overlap of granule i with wall segment w; -1 when its centre projects outside the segment."""
+    """Overlap (eq. 2) of granule i with wall segment w; -1 when its centre projects outside the
+    segment."""
     rx = y[2 * i] - walls.p0[w, 0]
     ry = y[2 * i + 1] - walls.p0[w, 1]
     along = rx * walls.tangent[w, 0] + ry * walls.tangent[w, 1]
@@ -47,7 +48,7 @@ def wall_overlap(y, i, w, radius, walls):
 
 @njit(cache=True, inline="always")
 def point_overlap(y, i, c, radius, points, ux, uy):
-    """Overlap of granule i with the flat solid contact point c displaced by (ux, uy)."""
+    """Overlap (eq. 2) of granule i with the flat solid contact point c displaced by (ux, uy)."""
     gap = (points.p[c, 0] + ux - y[2 * i]) * points.n[c, 0] + (points.p[c, 1] + uy - y[2 * i + 1]) * points.n[c, 1]
     return radius[i] - gap
 
@@ -98,7 +99,7 @@ def wall_contact(y, model, c, t):
     i = walls.g[c]
     w = walls.w[c]
     sw = vw = 0.0
-    if walls.drive[w, 1] > 0.0:  # a wall at rest skips its motion (for every wall, it made 28 granules 6x slower)
+    if walls.drive[w, 1] > 0.0:  # a wall at rest skips its motion (docs/performance.md, "A regression")
         sw, vw = wall_motion(walls.drive[w], t)
     delta = wall_overlap(y, i, w, radius, walls) + sw
     if delta <= 0.0:
@@ -395,11 +396,11 @@ def point_kinematics(y, model, c, ux, uy, wx, wy):
 
 @njit(cache=True)
 def interface_forces(y, model, u, w, out, derivatives=True):
-    """At the solid contact points displaced by u and moving at w (nc, 2): the forces on the solid
-    (out.F), |N| (out.normal), the relative tangential velocity (out.vrel) and, with
-    `derivatives`, the 2x2 derivatives of each force with respect to that point's displacement
-    (out.Du) and velocity (out.Dw), from `contact_law_derivatives` (the granules' own sensitivity
-    left out, the paper's Assumption 3)."""
+    """At the solid contact points displaced by u and moving at w (nc, 2): the contact law's forces
+    on the solid (eqs. (2), (3), (5); out.F), |N| (out.normal), the relative tangential velocity of
+    eq. (6) (out.vrel) and, with `derivatives`, the 2x2 derivatives of each force with respect to
+    that point's displacement (out.Du) and velocity (out.Dw), from `contact_law_derivatives` (the
+    granules' own sensitivity left out, the paper's Assumption 3)."""
     points = model.points
     mu, k_s = model.law.mu, model.law.k_s
     for c in range(points.g.shape[0]):

@@ -174,20 +174,17 @@ def hexagonal_columns(
 ) -> Medium:
     """Hexagonally packed, initially touching columns parallel to a face line.
 
-    The medium grows from the face along `grow` (left, right: the face is the line x = face and
-    columns are vertical; up, down: the face is y = face and the "columns" are horizontal rows);
-    a medium beside the solid grows away from it (`grow` = `side`). In the frame (u along the
-    growth, s along the face), columns[c] granules sit in column c (c = 0 nearest the face) at
-    u = R + gap + c R sqrt(3), shifted by R along the face when c is odd; column 0 is centred on
-    `center` (y for left/right growth, x for up/down).
+    The medium grows from the face along `grow` (left, right: the face is the line x = face and the
+    columns are vertical; up, down: the face is y = face and the "columns" are rows); a medium beside
+    the solid grows away from it (`grow` = `side`). With u along the growth and s along the face,
+    column c (0 nearest the face) holds columns[c] granules at u = R + gap + c R sqrt(3), shifted by
+    R along s when c is odd; column 0 is centred on `center`.
 
-    `walls` names the rigid walls that close it: the two channel walls along the growth, at the
-    ends of column 0 (bottom and top for left/right growth, left and right for up/down), `outer`
-    beyond the last column and `face` on the face line (only for a medium not beside a solid).
-    Labels run from the outermost column inward, then along +s (bottom to top, or left to right),
-    as in the paper (1..14 and A..N). Touching granules, walls and the solid's face clear one
-    another by a few ulps in floating point (`CLEARANCE`), so an unloaded medium feels no force.
-    """
+    `walls` names the rigid walls that close it: the two channel walls at the ends of column 0
+    (bottom and top, or left and right for up/down growth), `outer` beyond the last column and
+    `face` on the face line (only for a medium not beside a solid). Labels run from the outermost
+    column inward, then along +s, as in the paper (1..14 and A..N). Touching bodies clear one
+    another by `CLEARANCE` ulps, so an unloaded medium feels no force."""
     grow = side if grow is None else grow
     if side not in ("left", "right", "none"):
         raise ValueError(f"side must be 'left', 'right' or 'none', got {side!r}")

@@ -15,8 +15,8 @@ from .system import GranularState, GranularSystem
 # a Hertz impact lasts HERTZ_DURATION delta_max / v: 2 (2/5) B(2/5, 1/2)
 HERTZ_DURATION = 0.8 * math.gamma(0.4) * math.sqrt(math.pi) / math.gamma(0.9)
 
-# the dropped modes' quasi-static error in the energies, measured on the strong SSGM-side plate
-# case at cut-offs of 0.25-4 MHz: about TRUNCATION_ERROR (f_H / f_cut)^2 of the input
+# the dropped modes' quasi-static error in the energies: about TRUNCATION_ERROR (f_H / f_cut)^2 of
+# the input (fitted to the measurements in docs/performance.md, "Modes")
 TRUNCATION_ERROR = 0.1
 
 

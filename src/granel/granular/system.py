@@ -226,7 +226,7 @@ class NeighbourList:
 
 
 # below this many granules, all pairs are compared directly (n^2 / 2 distances, a few MB at most);
-# above, a k-d tree finds them (importing scipy.spatial costs about 0.3 s, half of a short run)
+# above, a k-d tree finds them (scipy.spatial is imported only then: its import is slow)
 DIRECT_PAIRS = 2000
 
 

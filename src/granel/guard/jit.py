@@ -1,25 +1,15 @@
 """numba's on-disk cache of granel's compiled kernels, keyed by all of their sources.
 
-numba keys a cached function by the time stamp and size of its *own* source file only. A kernel
-that inlines or calls a compiled function of another file keeps its cached machine code when only
-that other file changes: `coupling/exact.py`'s step ran the right-hand side of `granular/kernels.py`
-as it was when the cache was written. (That hid a sixfold slowdown of the right-hand side on every
-machine that had compiled before the change, and it could as well hide a change of the physics.)
+numba keys a cached function by its own source file only, so a kernel that inlines a compiled
+function of another file would keep stale machine code (docs/performance.md, "A regression, found
+and fixed"). `cached_njit(sources)` gives a `numba.njit` whose cache folder is named after a hash
+of every listed source and numba's version: `__pycache__/kernels-KEY` beside this package when it
+can be written, else `~/.cache/granel/numba/kernels-KEY`, or `NUMBA_CACHE_DIR/granel-kernels-KEY`.
+Older folders are removed, the newest KEEP kept.
 
-`cached_njit(sources)` gives a `numba.njit` whose cache sits in a folder named after a hash of
-every listed source (and numba's version): any change to any of them starts a new folder, so no
-compiled kernel outlives the code it was compiled from. The folder is `__pycache__/kernels-KEY`
-beside this package when it can be written (as numba's own in-tree cache), else
-`~/.cache/granel/numba/kernels-KEY`; with NUMBA_CACHE_DIR set, `NUMBA_CACHE_DIR/granel-kernels-KEY`.
-Folders of this kind left by older sources are removed, the newest KEEP kept (a checkout that
-switches branches reuses them).
-
-numba loads whatever it finds in its cache: a truncated or damaged file ends the process (a
-pickle error, or an LLVM assertion and SIGABRT). So each folder numba writes in keeps a manifest
-(`MANIFEST`: every file's size and CRC-32), recorded after numba saves a kernel and its files
-are synced (`_record_kernel`). Before numba loads a kernel, its files are checked against the
-manifest (`_check_kernel`); a kernel with a file the manifest does not know, or that does not
-match it, has its files removed, and numba compiles it again."""
+A damaged cache file ends a process inside numba, so each folder keeps a manifest (`MANIFEST`:
+every file's size and CRC-32), recorded after numba saves a kernel (`_record_kernel`); a kernel
+whose files do not match it is removed and compiled again (`_check_kernel`)."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ from .results import RECORD_DIMS, ResultFileError, wall_names
 
 RECORD_VERSION = 1  # the `model_record` attribute: raise when the record's layout changes
 DRIVE_PARAMS = 6  # `granular.loads.WallDrive.params`: amplitude, frequency, t0, duration, phase, ramp cycles
-LOAD_PARAMS = 8  # `granular.loads.LOAD_PARAMS`: a load history's parameters, zero-padded
+LOAD_PARAMS = 8  # `granular.laws.LOAD_PARAMS`: a load history's parameters, zero-padded
 
 
 @dataclass(frozen=True)

@@ -2,8 +2,8 @@
 
 A run's variables are first laid out as a `ResultSpec` (names, dimensions, arrays, attributes);
 `ResultSpec.to_dataset` makes the xarray Dataset, and `write_spec_netcdf` writes the same file
-without xarray (whose import, with pandas, costs about 0.5 s of a fresh `granel run`; xarray is
-imported lazily here for that reason)."""
+without xarray, which is imported lazily here (its import, with pandas, is a large part of a
+fresh `granel run`)."""
 
 from __future__ import annotations
 

@@ -23,8 +23,9 @@ def hermite_mass(rhoA: float, l: float) -> np.ndarray:
 
 
 def build_beam(x0, y0, width, length, thickness, E, rho, contacts, n_elements=40, clamped=(True, True)) -> SolidModel:
-    """contacts: list of (name, edge 'left'/'right', y). Cross-section: depth = width (x),
-    thickness (z); A = width * thickness, I = thickness * width^3 / 12."""
+    """The Euler-Bernoulli beam model (eq. 9): Hermite cubic elements, consistent mass, the ends
+    clamped where `clamped` says. contacts: list of (name, edge 'left'/'right', y). Cross-section:
+    depth = width (x), thickness (z); A = width * thickness, I = thickness * width^3 / 12."""
     A = width * thickness
     I = thickness * width**3 / 12.0
     l = length / n_elements

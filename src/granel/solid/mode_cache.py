@@ -52,10 +52,9 @@ def cache_limit() -> int:
 def prune_cache(keep=(), limit: int | None = None) -> list:
     """Remove the least recently used of granel's cache files (CACHE_PATTERNS; a cache hit
     touches its files), each with its check record, until the cache holds at most `limit` bytes
-    (`cache_limit()`), never the files in `keep` (the ones just written or read). A design study
-    meets a new plate at every trial (about 100 MB of modes each): without a bound the cache
-    would grow without end. Check records left without their file go too. Returns the removed
-    files (not their records); files it cannot remove are left."""
+    (`cache_limit()`), never the files in `keep` (the ones just written or read): a design study
+    meets a new plate at every trial. Check records left without their file go too. Returns the
+    removed files (not their records); files it cannot remove are left."""
     limit = cache_limit() if limit is None else limit
     folder = cache_dir()
     files = []
@@ -99,11 +98,11 @@ def _unlink(path) -> None:
 
 
 def all_modes(model: SolidModel) -> Modes:
-    """All modes of the solid, cached on disk by a hash of M and K (the plate's 3584 take about
-    9 s to compute). The shapes come back memory-mapped: a run reads only the rows at its
-    contacts (`at_dofs`), a field plot the whole matrix. A solid whose K and M are those of a
-    cached one times two scalars (another thickness, Young's modulus or density of the same
-    plate) gets that solid's modes scaled (`scaled_modes`), with no eigen-solve."""
+    """All modes of the solid, cached on disk by a hash of M and K. The shapes come back
+    memory-mapped: a run reads only the rows at its contacts (`at_dofs`), a field plot the whole
+    matrix. A solid whose K and M are those of a cached one times two scalars (another thickness,
+    Young's modulus or density of the same plate) gets that solid's modes scaled (`scaled_modes`),
+    with no eigen-solve."""
     what = f"the modes of a {model.kind} of {model.ndof} DOFs"
     return cached_modes(model, "modes", "", lambda: modal_analysis(model, None), mmap=True, what=what)
 
@@ -377,17 +376,15 @@ def discard(paths, damage: str, busy: Path | None = None) -> None:
 
 # ---------------------------------------------------------------- one computation at a time
 #
-# Workers of a sweep or a design study that meet the same new solid at once would each solve it
-# (a plate's modes take seconds of both cores): the first takes a lock file beside the cache
-# entry, naming itself by `guard.owners.process_token` (host, pid and the process's start time),
-# and the others wait for its modes. A lock whose holder is dead (its process gone on this host,
-# or its pid now another process's) is taken over at once. A lock of another host cannot be
-# asked: it is taken over when older than LOCK_WAIT_S. A wait says once what it waits for, and
-# ends at LOCK_WAIT_S after the lock was taken: the waiter then computes the modes itself
-# (without storing them: the live holder will). LOCK_WAIT_S is the longest a solve under the
-# lock is given: the dense solve of a solid at DENSE_LIMIT DOFs costs (8000 / 3584)^3 = 11 times
-# the paper plate's 13 s of one core, about 2.5 minutes, 10 on a loaded machine; a wrong guess
-# costs one extra solve, never a wrong result.
+# Workers of a sweep or a design study that meet the same new solid at once would each solve it:
+# the first takes a lock file beside the cache entry, naming itself by `guard.owners.process_token`
+# (host, pid and the process's start time), and the others wait for its modes. A lock whose holder
+# is dead (its process gone on this host, or its pid now another process's) is taken over at once;
+# a lock of another host when older than LOCK_WAIT_S. A wait says once what it waits for, and ends
+# at LOCK_WAIT_S after the lock was taken: the waiter then computes the modes itself (without
+# storing them: the live holder will). LOCK_WAIT_S is the longest a dense solve at DENSE_LIMIT DOFs
+# is given (docs/performance.md, "One solve per new solid"); a wrong guess costs one extra solve,
+# never a wrong result.
 
 LOCK_WAIT_S = 600.0
 LOCK_WRITE_S = 10.0  # an unreadable lock younger than this may be being written

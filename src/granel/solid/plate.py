@@ -184,8 +184,8 @@ PLATE_CACHE_VERSION = 2  # raise when the assembly below changes what it produce
 def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
                 clamped=(True, True)) -> SolidModel:
     """The reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one per
-    layer). The assembled matrices are cached on disk by the arguments: a run then needs no
-    scikit-fem (its import alone takes about 0.5 s); the element-level quantities of figures and
+    layer). The assembled matrices are cached on disk by the arguments, so that a run needs no
+    scikit-fem (a slow import); the element-level quantities of figures and
     movies (`element_energies`, `basis`) assemble the plate again on first use. A plate that
     differs from a cached one only in thickness, Young's modulus and density is that plate
     scaled (K by E h, M by rho h, the element volumes by h; `_scaled_plate`)."""

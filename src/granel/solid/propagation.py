@@ -8,17 +8,12 @@ g(tau) = sum_k g_k tau^k / k! (k = 0..3), the solution is, with x = w h,
 
 where S_p(x) = sum_m (-x^2)^m / (2m + p)! (S0 = cos x, S1 = sin x / x): the convolution of the
 oscillator's impulse response sin(w (h - tau)) / w with tau^k / k! is h^(k+2) S_(k+2)(x).
-`oscillator_functions` evaluates S0..S5 to full precision for x from 0 to beyond 1e3: below
-x = 2, S4 and S5 by their series and the others down from them, S_p = 1/p! - x^2 S_(p+2) (no
-cancellation there); above, by the recurrence S_(p+2) = (1/p! - S_p) / x^2 (each step divides the
-error by x^2 >= 4), with S2 = 2 sin^2(x/2) / x^2.
+`oscillator_functions` evaluates S0..S5 to full precision for x from 0 to beyond 1e3.
 
-Over a step the interface force is a polynomial of degree <= 3 in a basis H_b(tau), given by its
-Taylor rows at tau = 0: the basis through values (and slopes) at nodes (`interpolation_taylor`;
-the coupled solver's force models) or the cubic Hermite basis through values and slopes at both ends
+The force over a step is given in a basis H_b(tau) by its Taylor rows at tau = 0: through values
+at nodes (`interpolation_taylor`, the coupled solver's force models) or the cubic Hermite basis
 (`hermite_taylor`). `weights_at` gives, per mode, the displacement and velocity at tau per unit
-of each (modal) datum.
-"""
+of each (modal) datum."""
 
 from __future__ import annotations
 

@@ -19,16 +19,16 @@ def static_modes(force, P, w2, nc):
 
 def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = False, at_contacts=None):
     """Residual modes of the dropped modes at the contacts: Rayleigh-Ritz on their static shapes
-    Psi = K^-1 B' - Phi W^-2 P' (the retained modes' part removed, so Psi is M-orthogonal to them).
-    Psi' K Psi = R and B Psi = R, so the residual modes' static compliance at the contacts is R
-    exactly, and they carry the inertia of those shapes. Returns (omega_r, P_r = B Phi_r, Z, Psi)
-    with Phi_r = Psi Z; shapes that vanish (a beam's tangential DOFs) are left out.
+    Psi = K^-1 B' - Phi W^-2 P' (M-orthogonal to the retained modes), so that their static
+    compliance at the contacts is R = B K^-1 B' - P W^-2 P' exactly, with the inertia of those
+    shapes. Returns (omega_r, P_r = B Phi_r, Z, Psi) with Phi_r = Psi Z; shapes that vanish (a
+    beam's tangential DOFs) are left out.
 
-    `partial`: `shapes` holds only the modes below the cut-off (every one of them is kept), and
-    K^-1 B' comes from a sparse factorisation. Otherwise the basis is complete and `at_contacts`
-    = (P, P_d, omega_d), the retained and dropped modes at the contacts, is enough: Psi = Phi_d W_d^-2 P_d', so
-    R = P_d W_d^-2 P_d' and Psi' M Psi = P_d W_d^-4 P_d' (mass-normalised modes), with no
-    factorisation and no read of the shapes; Psi is then returned as None (nothing needs it)."""
+    `partial`: `shapes` holds only the modes below the cut-off (all kept), and K^-1 B' comes from a
+    sparse factorisation. Otherwise `at_contacts` = (P, P_d, omega_d), the retained and dropped
+    modes at the contacts, is enough: R = P_d W_d^-2 P_d' and Psi' M Psi = P_d W_d^-4 P_d', with
+    no factorisation, and Psi is returned as None. docs/performance.md ("Modes") says why residual
+    modes."""
     from scipy.linalg import eigh
 
     m2 = B.shape[0]

@@ -1,20 +1,17 @@
 """A solid's mirror symmetry about its mid-height, which splits its modal analysis in two.
 
-The paper's plate, its clamped ends, its mesh and its rigid layers are symmetric about the
-plate's mid-height whenever the media are (the paper's geometry and every design that keeps the
-media centred). The reflection y -> 2 y_c - y maps each node to its mirror image, keeps u_x and
-flips u_y and a rigid layer's rotation: on the solid's DOFs it is a signed permutation S with
-S^2 = I, and S' K S = K, S' M S = M. The eigenproblem K phi = w^2 M phi then splits into the
-modes symmetric under S and the antisymmetric ones, two problems of half the size:
+When a solid, its clamps, its mesh and its rigid layers are symmetric about y = y_c (the paper's
+plate with centred media), the reflection y -> 2 y_c - y is a signed permutation S of its DOFs
+(each node to its image, u_x kept, u_y and a layer's rotation flipped) with S' K S = K and
+S' M S = M. The eigenproblem K phi = w^2 M phi then splits into the modes symmetric under S and
+the antisymmetric ones:
 
     Q_s = span{e_i + s e_j},  Q_a = span{e_i - s e_j}    (j the image of DOF i, s its sign)
     (Q' K Q) z = w^2 (Q' M Q) z,   phi = Q z
 
-with Q orthonormal, so the shapes keep their mass normalisation. A dense solver's cost goes as the
-cube of the size: the two halves cost about a quarter of the whole (`modal.modal_analysis`).
-The symmetry is read from the mesh and checked on K and M themselves (to round-off); a solid
-without it is solved whole.
-"""
+with Q orthonormal, so the shapes keep their mass normalisation; the two halves of a dense solve
+cost about a quarter of the whole (`modal.modal_analysis`). S is read from the mesh and checked
+on K and M to round-off; a solid without it is solved whole."""
 
 from __future__ import annotations
 

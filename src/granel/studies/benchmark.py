@@ -1,12 +1,10 @@
 """`granel bench`: the paper's algorithm and the fast method (its default exact integrator, and
 modal Newmark at dtau0) on the same cases, in one process, with every figure beside its ratio.
 
-Deviations from the paper's algorithm say how close two discretisations are, not how accurate they
-are: the paper's algorithm is itself about 1.6e-3 off a converged solution at its 40 ns. With
-`reference=True` the strong SSGM-side plate case is also run by modal Newmark at a fixed 2.5 ns
-(within about 3e-6 of a converged solution: Newmark at 1.25 ns and the exact integrator at 10 ns
-with every mode agree within 1.3e-6; at 5 ns Newmark is still 1.5e-5 off, the size of the
-differences measured) and each method's errors against it are reported."""
+Deviations from the paper's algorithm say how close two discretisations are, not how accurate
+they are. With `reference=True` the strong SSGM-side plate case is also run by modal Newmark at a
+fixed 2.5 ns, a near-converged reference, and each method's errors against it are reported
+(docs/performance.md, "Accuracy", gives how far each is from a converged solution)."""
 
 from __future__ import annotations
 

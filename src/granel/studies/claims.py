@@ -2,26 +2,13 @@
 
 `measurements(runs)` turns the twelve result Datasets into numbers (nothing is typed in);
 `claims(m)` sets each statement of the paper beside granel's number and judges it by an explicit
-rule, printed with the verdict. The rules, once for all:
+rule, printed with the verdict (docs/analysis.md, "The claims table", lists the rules).
 
-* "about X" (a round figure read off a plot: "~0.2 ms", "around 20 %"): agree within +-30 % of X;
-* a range "a-b": agree inside the range;
-* a three-figure number (the mode periods of Fig. 6): agree within 1 %;
-* a comparison ("faster", "larger", "grows with the level"): agree when the inequality holds,
-  and a rule compares two cases only where the paper's sentence does;
-* a qualitative word gets a stated threshold ("close to unity": >= 0.9; "almost vanishes":
-  <= 0.05; "throughout": at least 90 % of the instants at which the solid holds more than 2 % of
-  the input; "almost simultaneously": within a quarter of the solid's energy-peak width).
-
-A statement that holds by construction (it follows from the model's symmetry, a bound the solver
-enforces or a rule granel applies, so it could not have come out otherwise) gets the verdict "by
-construction" and its reason, and is not counted as agreement: `tally` counts agreement over the
-statements that could have failed. Whether a statement is by construction is read from the runs
-(`construction_facts`, the Fig. 11 run's step rule), not assumed: on a run that does not enforce
-the bound, or a model that is not symmetric, the same statement is checked against data. A
-statement expected to hold by construction that fails is a "differ" (and a bug of granel).
-`verdict_flips` sets two lists of claims side by side (the paper's ambiguous outer walls).
-"""
+A statement that holds by construction (the model's symmetry, a bound the solver enforces, a rule
+granel applies) gets the verdict "by construction" and is not counted as agreement (`tally`).
+Whether it does is read from the runs (`construction_facts`), not assumed; one that fails anyway is
+a "differ" (and a bug of granel). `verdict_flips` sets two lists of claims side by side (the
+paper's ambiguous outer walls)."""
 
 from __future__ import annotations
 

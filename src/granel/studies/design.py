@@ -3,58 +3,14 @@ thicknesses, materials, friction, preload, drive amplitude, counts) that optimis
 metrics of a case, with Optuna, each trial evaluated by the sweep engine (`sweep.run_case`) on
 dask.distributed workers.
 
-A design file (TOML):
-
-    name = "diode"
-    base = "paper"                          # built-in scenario name or a path, as a sweep's
-    overrides = ['solid.kind="beam"']
-    mode = "reciprocity"                    # both directions of a shock (pair) | "run": one run
-    pair = ["LSGM:3", "SSGM:C"]
-    trials = 200                            # the default of --trials
-    seed = 1                                # a study is reproducible with one worker
-    sampler = "auto"                        # auto (TPE for one objective, NSGA-II for several) |
-                                            # tpe | cmaes | nsga2 | random
-
-    [[variables]]                           # continuous: low, high, optional log = true
-    field = "media.1.radius"
-    low = 0.003
-    high = 0.008
-    [[variables]]                           # integer: integer = true
-    field = "media.1.columns.1"
-    low = 2
-    high = 6
-    integer = true
-    [[variables]]                           # categorical: choices
-    field = "solid.material"
-    choices = ["steel", "aluminium"]
-
-    [[objectives]]                          # a trial metric of the mode (`modes`), a direction ...
-    metric = "nonreciprocity_index"
-    direction = "maximize"
-    [[objectives]]                          # ... or a target: minimise |metric / target - 1|
-    metric = "peak_wall_force_fwd_N"
-    target = 500.0
-    tolerance = 0.01                        # the misfit that counts as met (the default)
-
-    [[constraints]]                         # a metric with max and/or min
-    metric = "granular_mass_kg"
-    max = 0.5
-
-Trials: trial k applies the variables' values as overrides on top of the design's; its cases (one,
-or a spectrum's band: `modes.StudyMode.trial_cases`) are run by `sweep.run_case` (fingerprints,
-failure isolation and metrics are the sweep engine's and the mode's); an invalid design
-(overlapping granules, an invalid field value, a numerical stop) is a failed trial with its
-reason, and the study goes on. The study lives in DIR/study.journal (Optuna's journal
-file): a rerun of the same command continues it; a trial that was in flight when a study was
-killed is marked failed ("interrupted") and run again with the same values (its finished case,
-if any, is reused from DIR/cases/). Each trial's sampler is seeded from the design's seed and the
-number of trials finished before it, so with one worker a resumed study asks for the same
-values as an uninterrupted one.
-
-Before anything runs, `check_design` refuses a variable whose field the base scenario cannot take
-or that no run depends on (`check_variables_matter`). After the trials, `design_warnings` says
-when a best design sits at a variable's bound or misses a target.
-"""
+A trial applies its variables' values as overrides on top of the design's and runs its cases
+(`modes.StudyMode.trial_cases`); an invalid design is a failed trial with its reason, and the study
+goes on. The study lives in DIR/study.journal (Optuna's journal file): a rerun continues it, and a
+trial interrupted in flight is run again with the same values. Each trial's sampler is seeded from
+the design's seed and the number of trials finished before it. `check_design` refuses a variable
+that the base scenario cannot take or that no run depends on (`check_variables_matter`);
+`design_warnings` says when a best design sits at a bound or misses a target. docs/design.md gives
+the design file and the rest."""
 
 from __future__ import annotations
 

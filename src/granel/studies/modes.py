@@ -253,7 +253,7 @@ def force_metrics(scenarios: Runs, runs: dict) -> dict[str, float]:
     """A case's size and peak forces (`analysis.contacts`): granular_mass_kg, footprint_m2 (of
     the first run's scenario) and, per run, peak_contact_force_N and peak_wall_force_N, suffixed
     as `run_suffixes` says."""
-    from ..analysis.contacts import design_size, peak_forces  # lazy: its import costs 0.1 s
+    from ..analysis.contacts import design_size, peak_forces  # lazy: a slow import
     from ..analysis.result_model import result_system
 
     out: dict[str, float] = {}

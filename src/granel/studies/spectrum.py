@@ -15,10 +15,8 @@ case's frequency and amplitude, ramped up over `ramp_cycles`) for `cycles` drive
     balance           max |energy balance (13)| / max input work
 
 Both directions (drive A measure B, then drive B measure A) give the nonreciprocity
-20 log10(mobility_fwd / mobility_bwd) [dB]. Mobility is the measure a linear elastic system keeps
-equal both ways (the reciprocity theorem, with each granule's drive direction as its measuring
-direction), so a linear, reciprocal system reads 0 dB.
-"""
+20 log10(mobility_fwd / mobility_bwd) [dB], which reads 0 dB for a linear, reciprocal system
+(docs/narrowband.md, "The measures, and why mobility")."""
 
 from __future__ import annotations
 

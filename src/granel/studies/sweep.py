@@ -1,35 +1,13 @@
 """Parameter sweeps over any scenario field, run on dask.distributed (a LocalCluster by
 default, or an existing scheduler), with one NetCDF per run, resume, and a summary Dataset.
 
-A sweep file (TOML):
-
-    name = "nonreciprocity"
-    base = "paper"                       # built-in scenario name or a path
-    overrides = ['simulation.duration="0.8ms"']
-    mode = "reciprocity"                 # each case runs both directions (pair) | "run": one run
-    pair = ["LSGM:3", "SSGM:C"]
-
-    [[axes]]                             # one field, values by list, linspace or logspace
-    field = "excitations.0.fmax"
-    logspace = [63.67, 7958.0, 10]
-    [[axes]]
-    field = "solid.kind"
-    values = ["plate", "beam"]
-    [[axes]]                             # zipped fields that vary together: one dimension
-    name = "load"
-    zip = { "excitations.0.kind" = ["half_sine", "burst"], "excitations.0.frequency" = ["-", 2e4] }
-
-Cases are the Cartesian product of the axes (at most MAX_CASES). A value "-" leaves its field as
-the base has it (a zipped field that one case's load does not use: an override of a field the run
-ignores is refused, `scenario.usage`).
-
-What a case runs and measures is its mode's (`modes.StudyMode`: `run`, `reciprocity`,
-`spectrum`). Resume: a finished case leaves `cases/<tag>.json` (its metrics or its error) and one
-NetCDF per run. A rerun reuses a case's metrics only if it finished ok and its fingerprint matches
-(see `case_fingerprint`: the scenario text of each run, which carries the solver settings, the
-sweep's and the case's overrides, the mode's settings, the granel version and the metric rules); a
-run's NetCDF only if its scenario text and granel version match. Failed cases are always rerun.
-"""
+Cases are the Cartesian product of a sweep file's axes (at most MAX_CASES; a zipped axis varies
+several fields together); a value "-" leaves its field as the base has it. What a case runs and
+measures is its mode's (`modes.StudyMode`: `run`, `reciprocity`, `spectrum`). A finished case
+leaves `cases/<tag>.json` (its metrics or its error) and one NetCDF per run. A rerun reuses a
+case's metrics only if it finished ok with the same fingerprint (`case_fingerprint`), and a run's
+NetCDF only if its scenario text and granel version match; failed cases are always rerun.
+docs/sweeps.md gives the sweep file."""
 
 from __future__ import annotations
 

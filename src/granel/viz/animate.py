@@ -41,8 +41,8 @@ FIELDS = ("deformation", "energy-density")
 # colour scale of the energy-density movies: w / w0 of eq. (14) on a log scale
 W_MIN, W_MAX = 1e-6, 1.0
 CMAP = "inferno"
-# x264 speed preset: at the same constant quality (quality=7, CRF 15) 'veryfast' takes about half the
-# encoder time of the default 'medium' for a file about 3 % larger
+# x264 speed preset, faster than the default 'medium' at the same constant quality (quality=7,
+# CRF 15) for a slightly larger file (docs/performance.md)
 X264_PRESET = "veryfast"
 # the largest frame rate a movie may ask for (a GIF shows at most 100 frames per second)
 MAX_FPS = 1000
@@ -536,18 +536,16 @@ def _render_group(jobs: list[MovieJob]) -> list[tuple[bool, str, float]]:
 
 
 def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | None = None) -> list[Path]:
-    """Render many Appendix C movies (e.g. the 24 of `granel paper`: 4 cases x 3 shock levels x 2
-    fields, the magnified deformation and the energy density of eq. 14) and return their paths in
-    job order.
+    """Render many Appendix C movies (the magnified deformation or the energy density of eq. 14;
+    e.g. the 24 of `granel paper`) and return their paths in job order.
 
     jobs: MovieJobs, tuples (result .nc, output, field, magnification, max_frames, fps) or dicts
-    (see MovieJob.of). Jobs on one result file run together in one task, so that the file is read
-    and the solid model built once (unless there are fewer files than workers: then one task per
-    movie). workers > 1 renders in that many worker processes of a 'spawn' context (numba and
-    forked threads do not mix; as with any spawn pool, a script calling this must guard its entry
-    point with `if __name__ == "__main__":`); workers = 1 renders serially in this process.
-    progress(path) is called as each movie is written. If a movie fails the others are still
-    rendered, then MovieError names every failed output with its error."""
+    (see MovieJob.of). Jobs on one result file share a task (the file read and the solid built
+    once), unless there are fewer files than workers. workers > 1 renders in worker processes of a
+    'spawn' context (numba and forked threads do not mix: a script calling this must guard its entry
+    point with `if __name__ == "__main__":`); workers = 1 renders in this process. progress(path) is
+    called as each movie is written. A failed movie does not stop the others; MovieError then names
+    every failed output with its error."""
     jobs = [MovieJob.of(j) for j in jobs]
     for j in jobs:
         try:

@@ -2,49 +2,34 @@
 
 Formats (any combination):
 
-* ``vtk``: the granules as one VTU point cloud per output (``granules/granules_NNNNNN.vtu``) and
+* ``vtk``: the granules as one VTU point cloud per output (``granules/granules_NNNNNN.vtu``) with
   the time series ``granules.pvd`` (radius, velocity, omega and kinetic energy as point data: show
   them as sphere glyphs scaled by radius); a plate or beam as one VTU per stored solid output
-  (``solid/solid_NNNNNN.vtu``, Q8 quadrilaterals or the beam's centre line as line cells) with
-  ``solid.pvd``: nodal displacement and velocity as point data; element energy density and the
-  stress as cell data (see *Stress* below).
-* ``xdmf``: the same through meshio's XDMF time-series writer (``granules.xdmf`` + ``.h5``,
-  ``solid.xdmf`` + ``.h5``). An XDMF time series has one fixed mesh, so the granules' points are
-  their initial centres; their centres at each output are the point data ``position`` (and
-  ``displacement`` from the initial centres: ParaView's Warp By Vector moves them).
+  (``solid/solid_NNNNNN.vtu``, Q8 quadrilaterals or the beam's centre line) with ``solid.pvd``:
+  nodal displacement and velocity as point data, element energy density and stress as cell data.
+* ``xdmf``: the same through meshio's XDMF time series (``granules.xdmf``, ``solid.xdmf``, each
+  with its ``.h5``). Its mesh is fixed, so the granules' points are their initial centres, and
+  their centres at each output are the point data ``position`` (and ``displacement``).
 * ``extxyz``: ``granules.extxyz``, one extended-XYZ frame per output (for OVITO).
 * ``csv``: ``traces.csv`` (long format: time, granule, x, y, v_x, v_y, omega), ``walls.csv``
   (time, wall, normal, tangential), ``contacts.csv`` (time, contact, normal, tangential) and
   ``energies.csv`` (time and the energy-ledger variables that have only the time dimension).
 
-Every file is first written into a hidden staging folder inside the output folder (named after
-the exporting process, so that the next export removes it whatever killed this one), synced, then
-moved into place with `os.replace` (so each file appears whole); the staging folder, and only it,
-is removed afterwards. The output folder is granel's own (`guard.outputs`): files of the same
-names are replaced; nothing else in the folder is touched.
+Each file appears whole: it is written into a hidden staging folder (which the next export
+removes, whatever killed this one), synced and moved into place. The output folder is granel's
+own (`guard.outputs`): files of the same names are replaced, nothing else is touched. The solid's
+fields are rebuilt as the movies rebuild them, from the result's model record
+(`analysis.result_model.result_solid`, `animate.solid_states`).
 
-The solid's nodal fields are rebuilt with the functions the movies use: the solid model from the
-result's model record (`analysis.result_model.result_solid`), the reduced state at the stored solid outputs
-(`animate.solid_states`, i.e. `analysis.solid.reduced_states`), the nodal displacement with the
-model's `full_displacement` and the element energy density with `analysis.density.solid_energy_density`.
+Stress (cell data, Pa; `solid_stress`, from the E and nu of the solid's recorded recipe):
 
-Stress (cell data, Pa; `solid_stress`, from the full nodal DOF vector x = T q and the Young's
-modulus E and Poisson ratio nu of the solid's material in its recorded recipe):
-
-* plate: ``stress_xx``, ``stress_yy``, ``stress_xy``, the plane-stress Cauchy stress averaged over
-  each Q8 element (the area-weighted mean of its values at the 3 x 3 Gauss points of the plate's
-  own scikit-fem basis, the rule that assembles K), with the plate's law sigma = 2 mu eps +
-  lambda tr(eps) I, lambda = E nu / (1 - nu^2), mu = E / (2 (1 + nu)) (eq. 7;
-  `solid.plate.plane_stress_law`, the law its stiffness form uses); and ``von_mises``, sqrt(sxx^2 - sxx syy + syy^2 + 3 sxy^2)
-  of those mean components. A rigid layer is a constraint on the five edge nodes of two elements,
-  not a cell: those two elements are elastic Q8 cells whose outer side moves rigidly (the contact
-  force enters the plate through them), and their stress is computed like any other.
-* beam: ``bending_stress``, the outer-fibre bending stress E (h/2) |w''| at each element's
-  centre, w'' from the element's Hermite cubic (there w'' = (theta_2 - theta_1) / l), h the
-  section depth in the bending plane (the solid's width; the out-of-plane thickness only scales
-  the area). The beam is axially rigid (no axial DOF), so there is no axial stress.
-* rigid solid or no solid: no solid files, no stress.
-"""
+* plate: ``stress_xx``, ``stress_yy``, ``stress_xy``, the plane-stress law of eq. (7)
+  (`solid.plate.plane_stress_law`) averaged over each Q8 element (area-weighted over its 3 x 3
+  Gauss points), and ``von_mises``, sqrt(sxx^2 - sxx syy + syy^2 + 3 sxy^2) of those means. The
+  two elements a rigid layer holds are ordinary Q8 cells, their outer side moving rigidly.
+* beam: ``bending_stress``, the outer-fibre stress E (h/2) |w''| at each element's centre (eq. 9;
+  h the section's depth, the solid's width). The beam is axially rigid: no axial stress.
+* rigid solid or no solid: no solid files, no stress."""
 
 from __future__ import annotations
 
