@@ -200,3 +200,14 @@ def test_tabulated_loads_round_trip_through_the_record(results):
     system = result_system(with_record(ds, replace(rec, loads=loads)))
     assert [e.history(1e-5) for e in system.excitations] == [5.0, 2.5, 0.0]
     assert abs(system.excitations[2].history(2e-6)) <= 4 * np.finfo(float).eps  # the interpolation weight's rounding
+
+
+def test_the_records_layouts_are_the_laws():
+    """The record's parameter widths (io may not import granular, so it keeps its own) are the
+    ones the compiled laws read: a load's parameter slots and a shaker's parameters."""
+    from granel.granular.laws import LOAD_PARAMS
+    from granel.granular.loads import WallDrive
+    from granel.io.model import DRIVE_PARAMS, LOAD_PARAMS as RECORD_LOAD_PARAMS
+
+    assert RECORD_LOAD_PARAMS == LOAD_PARAMS
+    assert DRIVE_PARAMS == len(WallDrive(1e-6, 1e3).params())

@@ -5,29 +5,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..granular.materials import granule_volume
+
 
 def excited_reference(ds) -> float:
-    """w0 of eq. (14), 1/2 m v0^2 / V of the excited granule (v0: its peak speed)."""
+    """w0 of eq. (14), 1/2 m v0^2 / V of the excited granule (v0: its peak speed), its mass and
+    radius from the result's model record."""
+    from ..io.model import read_record
     from .reciprocity import excitation_of
 
     label, _ = excitation_of(ds)
     g = list(ds["granule"].values).index(label)
-    import tomllib
-
-    sc = tomllib.loads(ds.attrs["scenario"])
-    medium = label.split(":")[0]
-    med = next(m for m in sc["media"] if m["name"] == medium)
-    R = med["radius"]
-    rho = sc["materials"][med.get("material", "steel")]["rho"]
-    V = 4 / 3 * np.pi * R**3
+    rec = read_record(ds)
     v0 = float(np.hypot(ds["v_x"].values[:, g], ds["v_y"].values[:, g]).max())
-    return 0.5 * rho * V * v0**2 / V
+    return 0.5 * float(rec.mass[g]) * v0**2 / granule_volume(float(rec.radius[g]))
 
 
 def granule_energy_density(system, y_state_energies, radius) -> np.ndarray:
     """w of eq. (14) per granule: its energy (kinetic + rotational + potential, eq. 11) over its
     volume."""
-    return np.asarray(y_state_energies) / (4 / 3 * np.pi * np.asarray(radius) ** 3)
+    return np.asarray(y_state_energies) / granule_volume(np.asarray(radius, float))
 
 
 def solid_energy_density(model, q, v) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io.checkpoint import load_checkpoint, save_checkpoint
 from ..io.trajectory import Trajectory
-from .observation import Observation
+from .observation import Observation, energy_ledger
 from .protocol import Solver
 
 
@@ -95,8 +95,9 @@ def _initial_of_record(traj: Trajectory) -> tuple[float, float]:
     """The ledger (13) and the energy a run started with, from its first recorded output (for a
     checkpoint written before they were stored with it)."""
     first = {k: traj.first(k) for k in traj.names}
-    energy = float(np.sum(first["energy_media"]) + first["energy_solid"])
-    return energy + float(first["dissipated_viscous"] + first["dissipated_friction"] - first["input_work"]), energy
+    ledger = energy_ledger(float(first["energy_solid"]), float(np.sum(first["energy_media"])),
+                           float(first["dissipated_viscous"]), float(first["dissipated_friction"]), float(first["input_work"]))
+    return float(ledger), float(np.sum(first["energy_media"]) + first["energy_solid"])
 
 
 class WallTimeExceeded(RuntimeError):

@@ -13,7 +13,7 @@ from ..solid.modal import at_dofs
 from ..solid.reduction import static_modes
 from . import core
 from .frame import contact_frame, contact_normals
-from .observation import Observation, observe_outputs
+from .observation import Observation, modal_energy, observe_outputs
 from .protocol import Reached, SolverError, StepSink
 from .settings import SolverSettings
 
@@ -37,6 +37,7 @@ class ModalSolver:
             P, w2 = np.zeros((2 * nc, 0)), np.zeros(0)
         self.modes = modes
         self.solid = core.ModalSolid(w2, P, frame)
+        self.omega = modes.omega if model.ndof else np.zeros(0)
         self.normals = contact_normals(system)
         H = settings.halvings
         self.cache = core.StepCache(ready=np.zeros(H + 1, bool), D=np.zeros((H + 1, len(w2))),
@@ -102,7 +103,7 @@ class ModalSolver:
     # ------------------------------------------------------------ what the driver records
     def observe(self) -> Observation:
         st, nc = self.st, len(self.system.solid_contacts)
-        energy = np.array([[0.5 * float(st.etad @ st.etad), 0.5 * float(st.eta @ (self.solid.w2 * st.eta))]])
+        energy = np.array([modal_energy(st.eta, st.etad, self.omega)])
         return observe_outputs([self.t], st.y[None], st.u.reshape(1, nc, 2), energy, st.F[None], self.system,
                                self.stepper.model, self.normals, self.solid.frame.tangent)
 

@@ -29,6 +29,18 @@ def granular_energy(y, model, su):
     return kin.sum() + rot.sum() + pot.sum()
 
 
+@njit(cache=True)
+def modal_energy(eta, etad, omega):
+    """The solid's kinetic and strain energy (eq. 11) in mass-normalised modal coordinates,
+    1/2 sum eta'^2 and 1/2 sum omega^2 eta^2 (eq. 15 summed over the modes)."""
+    kinetic = 0.0
+    potential = 0.0
+    for i in range(eta.shape[0]):
+        kinetic += 0.5 * etad[i] * etad[i]
+        potential += 0.5 * omega[i] ** 2 * eta[i] * eta[i]
+    return kinetic, potential
+
+
 class OutputQuantities(NamedTuple):
     """Filled by `output_quantities` for a batch of K outputs."""
 

@@ -77,7 +77,7 @@ class Loads(NamedTuple):
     g: np.ndarray
     direction: np.ndarray  # (ne, 2)
     kind: np.ndarray
-    params: np.ndarray  # (ne, excitation.LOAD_PARAMS)
+    params: np.ndarray  # (ne, laws.LOAD_PARAMS)
     offset: np.ndarray  # (ne + 1,) into tab_t / tab_v
     tab_t: np.ndarray
     tab_v: np.ndarray

@@ -50,11 +50,11 @@ def effective_radius(R1: float, R2: float | None = None) -> float:
     return R1 if R2 is None else R1 * R2 / (R1 + R2)
 
 
-def effective_mass(m1: float, m2: float | None) -> float:
+def effective_mass(m1, m2):
     """m* of eq. (4). m2 = None is an immovable wall (m* = m1); m2 = 0 a massless layer (m* = 0)."""
     if m2 is None:
         return m1
-    if m2 == 0.0:
+    if np.ndim(m2) == 0 and m2 == 0.0:
         return 0.0
     return m1 * m2 / (m1 + m2)
 
@@ -83,14 +83,14 @@ def damping_coefficient(alpha_n, m_star, A):
 def pair_coefficients(E1, nu1, R1, m1, E2, nu2, R2, m2, alpha_n):
     """(A, G) of eq. (3) for two granules, with E*, R* and m* of eq. (4)."""
     A = hertz_coefficient(effective_modulus(E1, nu1, E2, nu2), effective_radius(R1, R2))
-    return A, damping_coefficient(alpha_n, m1 * m2 / (m1 + m2), A)
+    return A, damping_coefficient(alpha_n, effective_mass(m1, m2), A)
 
 
 def wall_coefficients(E, nu, R, m, alpha_n):
     """(A, G) of eq. (3) for a granule on a rigid, immovable wall: E* = E / (1 - nu^2), R* = R,
     m* = m."""
     A = hertz_coefficient(effective_modulus(E, nu), effective_radius(R))
-    return A, damping_coefficient(alpha_n, m, A)
+    return A, damping_coefficient(alpha_n, effective_mass(m, None), A)
 
 
 def point_coefficient(E, nu, R):

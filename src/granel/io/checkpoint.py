@@ -136,10 +136,3 @@ def _check_consistent(path: Path, state: dict, rec: dict, times: list) -> None:
     short = [name for name, v in rec.items() if name.startswith("solid:") and len(v) != ns]
     if short:
         raise CheckpointError(f"checkpoint {path}: corrupt (solid records {', '.join(short)} do not have {ns} entries)")
-
-
-def checkpoint_period(checkpoint, every: float, output_steps: int, dt: float) -> int:
-    """Output intervals between checkpoints (0: no checkpoints)."""
-    if not checkpoint or every <= 0:
-        return 0
-    return max(1, int(round(every / (output_steps * dt))))

@@ -48,6 +48,8 @@ def write_netcdf(ds, path: str | Path) -> Path:
     carries the `granel_version` attribute: granel's mark (`guard.owners.is_granel_file`)."""
     ds = ds.copy(deep=False)
     ds.attrs = storable_attrs({"granel_version": __version__, **ds.attrs})
+    if "unlimited_dims" in ds.encoding:  # a file's empty dimensions come back unlimited, maybe since dropped
+        ds.encoding = {**ds.encoding, "unlimited_dims": {d for d in ds.encoding["unlimited_dims"] if d in ds.dims}}
     buffer = io.BytesIO()
     with _synchronous_dask():
         ds.to_netcdf(buffer, engine="h5netcdf", invalid_netcdf=False)

@@ -18,15 +18,10 @@ def base_attrs(scenario_toml: str, solver: dict) -> dict:
     return attrs
 
 
-def trajectory_dataset(traj, system, model, attrs: dict, omega=None):
-    """The standard result Dataset of a run (see the README for the names), from a solver-neutral
-    `Trajectory`, the granular system and the solid model (`omega`: the natural frequencies of
-    the modal coordinates, if the solid state is modal)."""
-    return trajectory_spec(traj, system, model, attrs, omega).to_dataset()
-
-
 def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
-    """The variables of `trajectory_dataset` as a `ResultSpec`, with the model record (`io.model`)."""
+    """The result of a run (see the README for the names) from its `Trajectory`, its granular
+    system and its solid model, with the model record (`io.model`), as a `ResultSpec` (`omega`:
+    the natural frequencies of the modal coordinates, if the solid state is modal)."""
     t = traj.times
     r = traj.series
     nt = len(t)
@@ -57,7 +52,7 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         ("dissipated_viscous", "work of viscous contact forces, eq. (12)"),
         ("dissipated_friction", "work of friction forces, eq. (12)"),
         ("input_work", "work of the applied forces"),
-        ("balance_error", "E_solid + E_granular + D - input work, eq. (13)"),
+        ("balance_error", "E_solid + E_granular + D - input work, eq. (13), minus its value at t = 0"),
     ):
         data[key] = ("time", r(key).astype(float), {"units": "J", "long_name": long})
     for key, long in (("normal", "normal force on the solid (along n_ik)"), ("tangential", "tangential force on the solid (along t_ik = k x n_ik)")):

@@ -3,8 +3,8 @@ eqs. (11)-(13) and the interface forces; at the solid's outputs, its state in ma
 modal coordinates (or, for a solid too large for all modes, reduced nodal coordinates); per
 accepted step, its size, iterations and friction eigenvalues (A9).
 
-Records arrive one output at a time (`record`) or in blocks of outputs (`record_block`: arrays
-whose first axis is the output); they are kept as blocks and joined once (`series`)."""
+Records arrive in blocks of outputs (`record_block`: arrays whose first axis is the output); they
+are kept as blocks and joined once (`series`)."""
 
 from __future__ import annotations
 
@@ -35,17 +35,11 @@ class Trajectory:
     solver: dict = field(default_factory=dict)  # settings and counters, for the result's attributes
     watch: object = None  # called with the latest step time whenever a solver logs steps (progress, wall limit)
 
-    def record(self, t: float, obs: dict) -> None:
-        self.record_block(np.array([float(t)]), {k: np.asarray(v)[None] for k, v in obs.items()})
-
     def record_block(self, times, obs: dict) -> None:
         """Outputs at `times` (K,), each entry of `obs` an array whose first axis has length K."""
         self._times.append(np.asarray(times, float))
         for k, v in obs.items():
             self._rec[k].append(np.asarray(v))
-
-    def record_solid(self, t: float, snap: dict) -> None:
-        self.record_solid_block(np.array([float(t)]), {k: np.asarray(v)[None] for k, v in snap.items()})
 
     def record_solid_block(self, times, snap: dict) -> None:
         self._solid_times.append(np.asarray(times, float))

@@ -90,7 +90,7 @@ class SimulationSpec(_Strict):
     max_step: float = Field(1e-6, description="largest adaptive step [s]")
     mode_cutoff: Union[Literal["auto"], Annotated[float, Field(gt=0)]] = Field(
         "auto", description="exact integrator: eigenmodes above this frequency [Hz] are replaced by residual modes; auto: "
-        "from rtol and the stiffest solid contact (run.auto_mode_cutoff)")
+        "from rtol and the stiffest solid contact (granular.scales.auto_mode_cutoff)")
     ledger_tol: float = Field(8e-7, gt=0, lt=1, description="exact integrator: the energy balance (13) stays within this share of the largest load's energy")
     equilibrate: bool = Field(False, description="start from the static equilibrium of the constant loads (preloads), granules and solid (granular.static)")
     balance_limit: float = Field(1e-2, gt=0, description="stop (exit 3) when the energy balance (13) is off by more than this share of the energy put in")

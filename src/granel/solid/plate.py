@@ -132,6 +132,8 @@ def plane_stress_law(E, nu):
 
 
 def plane_stress_forms(E, nu, rho, h):
+    """The plate's weak forms, eq. (7), for thickness h: the stiffness h sigma(eps(u)) : eps(v) and
+    the mass h rho u . v (bilinear), and the strain and kinetic energy functionals."""
     from skfem import BilinearForm, Functional
     from skfem.helpers import ddot, dot, sym_grad
 

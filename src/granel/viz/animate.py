@@ -30,7 +30,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..analysis.density import granule_energies, granule_states  # noqa: E402
+from ..analysis.density import granule_energies, granule_energy_density, granule_states  # noqa: E402
 from ..analysis.result_model import result_modes, result_solid, result_system  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
 from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
@@ -213,7 +213,7 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
             plan.beam_edges = (np.linspace(xs[0], xs[-1], len(xs) + 1), ys)
             plan.beam_w = np.clip(np.stack([g[2] for g in grids]) / w0, W_MIN, None)
     e = granule_energies(system, granule_states(ds, idx), SU)
-    plan.granule_w = np.clip(e / (4 / 3 * np.pi * system.radius**3) / w0, W_MIN, None)
+    plan.granule_w = np.clip(granule_energy_density(system, e, system.radius) / w0, W_MIN, None)
     return plan
 
 

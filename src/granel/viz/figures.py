@@ -169,7 +169,7 @@ def granule_energies_at(ds, k: int, su=None):
 
 def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=None):
     """Granules and the solid coloured by the normalised energy density (14) at `time`."""
-    from ..analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+    from ..analysis.density import beam_energy_density_grid, excited_reference, granule_energy_density, solid_energy_density
     from .plots import draw_plate
 
     system, model = result_system(ds), result_solid(ds)
@@ -178,7 +178,7 @@ def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=No
     q, v, _ = solid_state_at(ds, ds["time"].values[k], modes)
     su = (model.contact_map() @ q).reshape(-1, 2)
     e, _ = granule_energies_at(ds, k, su)
-    wg = e / (4 / 3 * np.pi * system.radius**3) / w0
+    wg = granule_energy_density(system, e, system.radius) / w0
     norm = norm or LogNorm(1e-6, 1.0)
     patches = [Circle((x, y), r) for x, y, r in zip(ds["x"].values[k], ds["y"].values[k], system.radius)]
     pc = PatchCollection(patches, cmap=cmap, norm=norm, edgecolor="0.5", linewidth=0.3)

@@ -9,6 +9,7 @@ from ...granular.bundles import interface_buffers
 from ...granular.kernels import interface_forces, motion_at, rk4_substepped
 from ...guard.jit import njit
 from ...solid.propagation import weights_at
+from ..observation import modal_energy
 from .operators import propagate_mode
 from .state import StepData
 
@@ -75,8 +76,4 @@ def solid_at_outputs(P, omega, oeta, oetad, su, energy):
     for o in range(oeta.shape[0]):
         u = np.dot(P, oeta[o]) if P.shape[1] else np.zeros(2 * nc)
         su[o, :, :] = u.reshape(nc, 2)
-        ep = 0.0
-        for i in range(oeta.shape[1]):
-            ep += 0.5 * omega[i] ** 2 * oeta[o, i] ** 2
-        energy[o, 0] = 0.5 * np.dot(oetad[o], oetad[o])
-        energy[o, 1] = ep
+        energy[o, 0], energy[o, 1] = modal_energy(oeta[o], oetad[o], omega)

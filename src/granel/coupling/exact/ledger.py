@@ -12,7 +12,7 @@ import numpy as np
 from ...granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK
 from ...granular.kernels import load_value, overlaps
 from ...guard.jit import njit
-from ..observation import energy_ledger, granular_energy
+from ..observation import energy_ledger, granular_energy, modal_energy
 from .operators import modes_of_contacts, propagate_mode
 from .state import GRID_PER_OCTAVE
 
@@ -42,12 +42,11 @@ def trial_ledger(state, solid, cache, slot, model, work):
         modes_of_contacts(unknowns.X.reshape(nn, m2), solid.P, unknowns.modal_force[1:])
     free = cache.free[slot, nn - 1]
     disp, vel = cache.end_disp[slot], cache.end_vel[slot]
-    es = 0.0
     for i in range(nr):
-        e, v = propagate_mode(free, disp, vel, i, state.eta[i], state.etad[i], unknowns.modal_force)
-        unknowns.eta_end[i] = e
-        unknowns.etad_end[i] = v
-        es += 0.5 * (v * v + solid.omega[i] ** 2 * e * e)
+        unknowns.eta_end[i], unknowns.etad_end[i] = propagate_mode(free, disp, vel, i, state.eta[i], state.etad[i],
+                                                                   unknowns.modal_force)
+    kinetic, potential = modal_energy(unknowns.eta_end, unknowns.etad_end, solid.omega)
+    es = kinetic + potential
     y = work.granular.y
     eg = granular_energy(y, model, work.nodes.u[nn - 1].reshape(m2 // 2, 2))
     acc = 6 * model.granules.radius.shape[0]
@@ -92,9 +91,8 @@ def contact_roundoff(y, dy, model, su, t):
 def state_ledger(y, eta, etad, solid, model):
     """E_solid + E_granular + D - W (eq. 13) of a state (the granules y, the modes eta, eta')."""
     nc = solid.P.shape[0] // 2
-    es = 0.0
-    for i in range(eta.shape[0]):
-        es += 0.5 * (etad[i] * etad[i] + solid.omega[i] ** 2 * eta[i] * eta[i])
+    kinetic, potential = modal_energy(eta, etad, solid.omega)
+    es = kinetic + potential
     su = np.dot(solid.P, eta) if eta.shape[0] else np.zeros(2 * nc)
     acc = 6 * model.granules.radius.shape[0]
     return energy_ledger(es, granular_energy(y, model, su.reshape(nc, 2)), y[acc + ACC_VISC], y[acc + ACC_FRIC],
