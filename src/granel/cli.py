@@ -232,9 +232,9 @@ def run(
 ):
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
+    from .guard.exits import NotWritten
     from .io.checkpoint import CheckpointError
-    from .io.results import write_spec_netcdf
-    from .run import run_scenario, summarize
+    from .run import run_to_file
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
     implied = []
@@ -260,22 +260,14 @@ def run(
         def progress(t):
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
-        try:
-            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit, dataset=False)
+        try:  # a stopped run (run.RunStopped) ends with its own line, "run stopped: ...", exit 3
+            summary = run_to_file(sc, output, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit)
         except S.ScenarioError as e:
             _fail(str(e))
         except CheckpointError as e:
             _fail(str(e), e.code)
-        except RuntimeError as e:
-            _fail(f"run stopped: {e}", code=3)
-    try:
-        write_spec_netcdf(ds, output)
-    except OSError as e:
-        _fail(f"-o {output}: could not write the result: {e}", code=4)
-    if ckpt.exists() and (sc.simulation.checkpoint_every > 0 or resume is not None):
-        ckpt.unlink()  # finished: the result replaces this run's checkpoint
-    summary = summarize(ds)
-    summary["output"] = str(output)
+        except NotWritten as e:
+            _fail(f"-o {output}: could not write the result: {e.cause}", code=4)
     if json_summary:
         print(json.dumps(summary, indent=2))
     _print_summary(summary)

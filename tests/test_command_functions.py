@@ -1,0 +1,48 @@
+"""The functions the commands call (issue 29: a command parses, checks, calls one function and
+prints), each on its own: what it writes, what it returns, and the errors by which the command
+tells its failures apart."""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pytest
+
+import granel.run as R
+from granel import scenario as S
+from granel.guard.exits import FILES, STOPPED, NotWritten
+from granel.io.results import read_netcdf
+
+SHORT = ['solid.kind="rigid"', 'simulation.duration="0.005ms"']
+
+
+def rigid(excited: str) -> S.Scenario:
+    return S.load("paper", [*SHORT, f'excitations.0.granule="{excited}"'])
+
+
+def stopped(*args, **kwargs):
+    raise RuntimeError("boom")
+
+
+# ------------------------------------------------------------------------- granel run
+
+
+def test_run_to_file_writes_the_result_and_returns_its_summary(tmp_path):
+    sc = S.load("paper", [*SHORT, 'simulation.checkpoint_every="0.002ms"'])
+    out, ckpt = tmp_path / "r.nc", tmp_path / "r.ckpt"
+    times = []
+    summary = R.run_to_file(sc, out, times.append, checkpoint=ckpt)
+    np.testing.assert_equal(summary, {**R.summarize(read_netcdf(out)), "output": str(out)})
+    assert times and times[-1] == pytest.approx(5e-6)
+    assert not ckpt.exists()  # the result replaces the checkpoint
+
+
+def test_run_to_file_tells_a_stopped_run_from_a_failed_write(tmp_path, monkeypatch):
+    (tmp_path / "folder.nc").mkdir()
+    with pytest.raises(NotWritten) as e:
+        R.run_to_file(rigid("SSGM:C"), tmp_path / "folder.nc")
+    assert e.value.code == FILES and e.value.what == "the result" and isinstance(e.value.cause, OSError)
+    monkeypatch.setattr(R, "run_scenario", stopped)
+    with pytest.raises(R.RunStopped, match="^run stopped: boom$") as e:
+        R.run_to_file(rigid("SSGM:C"), tmp_path / "r.nc")
+    assert e.value.code == STOPPED and not (tmp_path / "r.nc").exists()
