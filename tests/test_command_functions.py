@@ -4,14 +4,17 @@ tells its failures apart."""
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 
 import numpy as np
 import pytest
 
 import granel.run as R
 from granel import scenario as S
+from granel.analysis.reciprocity import reciprocity_metrics
 from granel.guard.exits import FILES, STOPPED, NotWritten
 from granel.io.results import read_netcdf
+from granel.studies.reciprocity import run_path, run_reciprocity
 
 SHORT = ['solid.kind="rigid"', 'simulation.duration="0.005ms"']
 
@@ -46,3 +49,32 @@ def test_run_to_file_tells_a_stopped_run_from_a_failed_write(tmp_path, monkeypat
     with pytest.raises(R.RunStopped, match="^run stopped: boom$") as e:
         R.run_to_file(rigid("SSGM:C"), tmp_path / "r.nc")
     assert e.value.code == STOPPED and not (tmp_path / "r.nc").exists()
+
+
+# ------------------------------------------------------------------------- granel reciprocity
+
+
+def test_run_reciprocity_writes_both_runs_and_returns_their_metrics(tmp_path):
+    scenarios = {"SSGM:C": rigid("SSGM:C"), "LSGM:3": rigid("LSGM:3")}  # the forward run first
+    entered = []
+    runs, metrics = run_reciprocity(scenarios, tmp_path, running=lambda exc: entered.append(exc) or nullcontext())
+    assert entered == ["SSGM:C", "LSGM:3"] and list(runs) == entered
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert written == ["fig3_velocities.pdf", "fig3_velocities.png", "shock-LSGM3.nc", "shock-SSGMC.nc"]
+    assert run_path(tmp_path, "LSGM:3") == tmp_path / "shock-LSGM3.nc"
+    for excited, ds in runs.items():
+        np.testing.assert_array_equal(read_netcdf(run_path(tmp_path, excited))["v_x"].values, ds["v_x"].values)
+    np.testing.assert_equal(metrics, reciprocity_metrics(runs["SSGM:C"], runs["LSGM:3"]))  # NaN where nothing arrives
+    np.testing.assert_equal(metrics, reciprocity_metrics(read_netcdf(tmp_path / "shock-SSGMC.nc"),
+                                                         read_netcdf(tmp_path / "shock-LSGM3.nc")))
+
+
+def test_run_reciprocity_names_the_stopped_run_and_the_failed_write(tmp_path, monkeypatch):
+    scenarios = {"SSGM:C": rigid("SSGM:C"), "LSGM:3": rigid("LSGM:3")}
+    (tmp_path / "shock-SSGMC.nc").mkdir()
+    with pytest.raises(NotWritten) as e:
+        run_reciprocity(scenarios, tmp_path)
+    assert e.value.what == "the run" and e.value.path == tmp_path / "shock-SSGMC.nc"
+    monkeypatch.setattr(R, "run_scenario", stopped)
+    with pytest.raises(R.RunStopped, match="^run with the shock on SSGM:C stopped: boom$"):
+        run_reciprocity(scenarios, tmp_path)

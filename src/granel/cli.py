@@ -456,10 +456,8 @@ def reciprocity(
     json_out: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
 ):
     """Run both directions (shock at A measured at B, and the reverse) and compare."""
-    from .analysis.reciprocity import reciprocity_metrics
-    from .viz.figures import fig3_velocities
-    from .io.results import write_netcdf
-    from .run import run_scenario
+    from .guard.exits import NotWritten
+    from .studies.reciprocity import run_reciprocity
 
     if a == b:
         _fail(f"--a and --b are both {a!r}: give two different granules")
@@ -475,25 +473,12 @@ def reciprocity(
     check_disk(sum(run_needs(sc).result for sc in scs.values()), out, f"--out {out}: the two runs")
     _check_folder(out, "--out", "reciprocity", inputs=(S.scenario_file(scenario), *S.referenced_files(sc0)),
                   recognise=lambda p: any(is_granel_file(f) for f in p.glob("shock-*.nc")))
-    runs = {}
-    for exc, sc in scs.items():
-        try:
-            with console.status(f"running with the shock on {exc}"):
-                ds = run_scenario(sc)
-        except S.ScenarioError as e:
-            _fail(str(e))
-        except RuntimeError as e:
-            _fail(f"run with the shock on {exc} stopped: {e}", 3)
-        try:
-            write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the run ({e})", 4)
-        runs[exc] = ds
-    m = reciprocity_metrics(runs[b], runs[a])
-    try:
-        fig3_velocities(runs[b], runs[a], out / "fig3_velocities")
-    except OSError as e:
-        _fail(f"--out {out}: cannot write the figure ({e})", 4)
+    try:  # a stopped run (run.RunStopped) ends with its own line, exit 3
+        _, m = run_reciprocity(scs, out, running=lambda exc: console.status(f"running with the shock on {exc}"))
+    except S.ScenarioError as e:
+        _fail(str(e))
+    except NotWritten as e:
+        _fail(f"--out {out}: cannot write {e.what} ({e.cause})", 4)
     if json_out:
         print(json.dumps(m, indent=2, default=float))
         return
