@@ -78,3 +78,45 @@ def test_run_reciprocity_names_the_stopped_run_and_the_failed_write(tmp_path, mo
     monkeypatch.setattr(R, "run_scenario", stopped)
     with pytest.raises(R.RunStopped, match="^run with the shock on SSGM:C stopped: boom$"):
         run_reciprocity(scenarios, tmp_path)
+
+
+# ------------------------------------------------------------------------- granel modes
+
+
+def test_scenario_modes_build_only_the_granules_and_the_solid(tmp_path, monkeypatch):
+    from granel.solid.modal import classify_modes, modal_analysis
+    from granel.studies.natural_modes import scenario_modes
+
+    sc = S.load("paper", ['solid.kind="beam"'])
+    solid = S.build_problem(sc).solid
+    reference = modal_analysis(solid, 3)
+
+    def refuse(sc):
+        raise AssertionError("the whole problem was built")
+
+    monkeypatch.setattr(S, "build_problem", refuse)
+    res = scenario_modes(sc, 3)
+    assert res.shown == 3 and res.plot is None and res.solid.ndof == solid.ndof
+    np.testing.assert_allclose(res.modes.periods[:3], reference.periods, rtol=1e-9)
+    assert res.kinds == classify_modes(solid, reference, range(3)) == ["bending"] * 3
+    assert res.summary() == {"solid": "beam", "dofs": solid.ndof, "elements": solid.nelements,
+                             "periods_ms": [float(p) for p in res.modes.periods[:3] * 1e3], "kinds": ["bending"] * 3,
+                             "modes_computed": res.modes.count}
+    drawn = scenario_modes(sc, 2, tmp_path / "fig6.png")  # Fig. 6 draws mode 7: seven are computed
+    assert drawn.modes.count >= 7 and len(drawn.kinds) == 7 and drawn.shown == 2
+    assert (tmp_path / "fig6.png").stat().st_size > 0 and drawn.summary()["plot"] == str(tmp_path / "fig6.png")
+
+
+def test_an_unbuildable_solid_is_a_scenario_error_naming_the_solid(monkeypatch):
+    import granel.scenario.build as B
+
+    def clamped(recipe):
+        raise ValueError("a contact on a clamped node")
+
+    sc = S.load("paper", ['solid.kind="beam"'])
+    system, _, _ = S.build_granular(sc, sc.base)
+    monkeypatch.setattr(B, "build_solid_model", clamped)
+    with pytest.raises(S.ScenarioError, match="^solid: a contact on a clamped node$"):
+        S.build_solid(sc, system)
+    with pytest.raises(S.ScenarioError, match="^solid: a contact on a clamped node$"):
+        S.build_problem(sc)

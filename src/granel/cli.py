@@ -365,7 +365,7 @@ def modes(
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
 ):
     """Natural periods and kinds (bending / axial / bulk) of the solid's modes."""
-    from .solid.modal import classify_modes, modal_analysis
+    from .studies.natural_modes import scenario_modes
 
     if count < 1:
         _fail(f"--count {count}: give a whole number of modes >= 1")
@@ -374,31 +374,14 @@ def modes(
         _fail(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or --solid beam")
     if plot is not None:
         _picture_output(plot, "--plot", _scenario_inputs(scenario, sc))
-    model = S.build_problem(sc).solid
-    want = max(count, 7 if plot else 0)
-    md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)
-    n = min(count, md.count)
-    kinds = classify_modes(model, md, range(max(n, min(7, md.count))))
-    out = {
-        "solid": model.kind,
-        "dofs": model.ndof,
-        "elements": model.nelements,
-        "periods_ms": [float(p) for p in md.periods[:n] * 1e3],
-        "kinds": kinds[:n],
-        "modes_computed": md.count,
-    }
-    if plot:
-        from .viz.plots import plot_modes
-
-        which = tuple(k for k in (0, 3, 6) if k < md.count)
-        plot_modes(model, md, kinds, which, plot)
-        out["plot"] = str(plot)
+    res = scenario_modes(sc, count, plot)
     if json_out:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(res.summary(), indent=2))
         return
+    model, periods = res.solid, res.modes.periods
     t = Table("mode", "period [ms]", "frequency [kHz]", "kind", title=f"{model.kind}: {model.ndof} DOFs, {model.nelements} elements")
-    for k in range(n):
-        t.add_row(str(k + 1), f"{md.periods[k] * 1e3:.5f}", f"{1 / md.periods[k] / 1e3:.3f}", kinds[k])
+    for k in range(res.shown):
+        t.add_row(str(k + 1), f"{periods[k] * 1e3:.5f}", f"{1 / periods[k] / 1e3:.3f}", res.kinds[k])
     Console().print(t)
 
 
