@@ -5,11 +5,14 @@ tells its failures apart."""
 from __future__ import annotations
 
 from contextlib import nullcontext
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import granel.run as R
+import granel.studies.spectrum as SP
+import granel.studies.sweep as SW
 from granel import scenario as S
 from granel.analysis.reciprocity import reciprocity_metrics
 from granel.guard.exits import FILES, STOPPED, NotWritten
@@ -120,3 +123,58 @@ def test_an_unbuildable_solid_is_a_scenario_error_naming_the_solid(monkeypatch):
         S.build_solid(sc, system)
     with pytest.raises(S.ScenarioError, match="^solid: a contact on a clamped node$"):
         S.build_problem(sc)
+
+
+# ------------------------------------------------------------------------- granel spectrum and sweep
+
+
+def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude(tmp_path, monkeypatch):
+    spec = SP.spectrum_sweep("paper", ['solid.kind="rigid"'], [1e3, 2e3], [10.0], drive="LSGM:3", measure="SSGM:C",
+                             both_directions=True, cycles=20.0, window_cycles=5.0, ramp_cycles=2.0,
+                             samples_per_period=16)
+    assert spec.mode == "spectrum" and spec.overrides == ['solid.kind="rigid"']
+    assert (spec.name, spec.base) == ("spectrum of paper", "paper")
+    assert [(a.field, a.values) for a in spec.axes] == [(SP.FREQUENCY_FIELD, [1e3, 2e3]), (SP.AMPLITUDE_FIELD, [10.0])]
+    assert spec.spectrum.runs() == [("fwd", "LSGM:3", "SSGM:C"), ("bwd", "SSGM:C", "LSGM:3")]
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="window"):
+        SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C", cycles=4.0)
+    monkeypatch.chdir(tmp_path)
+    spec = SP.spectrum_sweep("mine.toml", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    assert (spec.name, spec.base) == ("spectrum of mine", str(tmp_path.resolve() / "mine.toml"))  # by its absolute path
+
+
+def _written(calls):
+    def write(summary, spectrum, path):
+        calls.append(("write", summary, path))
+        raise PermissionError(13, "denied")
+
+    return write
+
+
+def test_run_spectrum_runs_the_cases_beside_the_spectrum_then_writes_it(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(SW, "run_spec", lambda spec, base, out, *a: calls.append(("run", base, out)) or "summary")
+    monkeypatch.setattr(SP, "write_spectrum", _written(calls))
+    spec = SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    path = tmp_path / "sp.nc"
+    with pytest.raises(NotWritten) as e:
+        SP.run_spectrum(spec, path)
+    assert calls == [("run", Path("."), tmp_path / "sp.cases"), ("write", "summary", path)]
+    assert SP.cases_folder(path) == tmp_path / "sp.cases"
+    assert e.value.what == "the spectrum" and isinstance(e.value.cause, PermissionError)
+
+
+def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(SW, "run_spec", lambda spec, base_dir, out, *a: calls.append(("run", out)) or "summary")
+    monkeypatch.setattr(SP, "write_spectrum", _written(calls))
+    plain = SW.SweepSpec.model_validate({"base": "paper", "axes": [{"field": "contact.mu", "values": [0.1]}]})
+    assert SW.sweep_study(plain, tmp_path, tmp_path / "out") == "summary" and calls == [("run", tmp_path / "out")]
+    calls.clear()
+    spec = SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    with pytest.raises(NotWritten) as e:
+        SW.sweep_study(spec, tmp_path, tmp_path / "out")
+    assert calls == [("run", tmp_path / "out"), ("write", "summary", tmp_path / "out" / "spectrum.nc")]
+    assert e.value.path == tmp_path / "out" / "spectrum.nc"

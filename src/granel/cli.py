@@ -629,7 +629,8 @@ def sweep(
     """Run a parameter sweep on dask.distributed; re-running skips finished cases.
     Exit code 3 if any case failed."""
     _check_workers(workers)
-    from .studies.sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
+    from .guard.exits import NotWritten
+    from .studies.sweep import SweepFileError, cases, load_sweep, sweep_inputs, sweep_study
 
     try:
         spec, base_dir = load_sweep(sweep_file)
@@ -647,8 +648,12 @@ def sweep(
             plan.file(out / f"spectrum{suffix}", f"--out (its spectrum{suffix})")
     plan.check().prepare()
     n = len(cases(spec))
-    ds, failed = _run_cases(f"sweep {spec.name}", n, lambda progress: run_sweep(sweep_file, out, workers, scheduler, progress),
-                            scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
+    try:
+        ds, failed = _run_cases(f"sweep {spec.name}", n,
+                                lambda progress: sweep_study(spec, base_dir, out, workers, scheduler, progress),
+                                scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
+    except NotWritten as e:
+        _fail(f"--out {out}: cannot write the spectrum ({e.cause})", 4)
     metrics = [v for v in ds.data_vars if v != "status"]
     t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok, {len(failed)} failed")
     for m in metrics:
@@ -660,12 +665,6 @@ def sweep(
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
     if spec.mode == "spectrum":
-        from .studies.spectrum import write_spectrum
-
-        try:
-            write_spectrum(ds, spec.spectrum, out / "spectrum.nc")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the spectrum ({e})", 4)
         console.print(f"spectrum: {out / 'spectrum.nc'}, {out / 'spectrum.png'}, {out / 'spectrum.md'}")
     if failed:
         _fail(f"{len(failed)} of {n} cases failed (listed above; their status is in {out / 'summary.nc'}); "
@@ -699,8 +698,10 @@ def spectrum(
     Exit code 3 if any run failed."""
     from pydantic import ValidationError
 
-    from .studies.spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
-    from .studies.sweep import SweepSpec, cases, check_mode, run_spec
+    from .guard.exits import NotWritten
+    from .studies.spectrum import (cases_folder, parse_amplitudes, parse_frequencies, run_spectrum, spectrum_report,
+                                   spectrum_sweep)
+    from .studies.sweep import cases, check_mode
 
     _check_workers(workers)
     for name, value in (("--cycles", cycles), ("--window-cycles", window_cycles), ("--ramp-cycles", ramp_cycles)):
@@ -714,21 +715,15 @@ def spectrum(
         amps = parse_amplitudes(amplitudes)
     except ValueError as e:
         _fail(f"--amplitudes {amplitudes}: {e}")
-    source = Path(scenario)
     if scenario not in S.builtin_names():
         from .guard.reading import check_file
 
-        if not os.path.lexists(source):  # neither a file nor a built-in name
+        if not os.path.lexists(scenario):  # neither a file nor a built-in name
             _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
-        check_file(source, "scenario")  # a folder, a FIFO, a dangling link, ...: exit 2 or 4 naming it
-    base = scenario if scenario in S.builtin_names() else str(source.resolve())
+        check_file(Path(scenario), "scenario")  # a folder, a FIFO, a dangling link, ...: exit 2 or 4 naming it
     try:
-        spec = SweepSpec.model_validate({
-            "name": f"spectrum of {source.stem if scenario not in S.builtin_names() else scenario}", "base": base,
-            "overrides": list(set_), "mode": "spectrum",
-            "spectrum": {"drive": drive, "measure": measure, "both_directions": both_directions, "cycles": cycles,
-                         "window_cycles": window_cycles, "ramp_cycles": ramp_cycles, "samples_per_period": samples},
-            "axes": [{"field": FREQUENCY_FIELD, "values": freqs}, {"field": AMPLITUDE_FIELD, "values": amps}]})
+        spec = spectrum_sweep(scenario, set_, freqs, amps, drive=drive, measure=measure, both_directions=both_directions,
+                              cycles=cycles, window_cycles=window_cycles, ramp_cycles=ramp_cycles, samples_per_period=samples)
     except ValidationError as e:
         _fail(S._format_validation_error(e).replace("invalid scenario", "invalid option").replace("spectrum.", "--")
               .replace("samples_per_period", "samples").replace("_", "-"))
@@ -739,7 +734,7 @@ def spectrum(
     except S.ScenarioError as e:
         msg = str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure")
         _fail(msg if scenario in msg or "--drive" in msg or "--measure" in msg else f"{scenario}: {msg}")
-    work = out.with_suffix(".cases")
+    work = cases_folder(out)
     from .guard.outputs import OutputPlan
     from .studies.sweep import sweep_inputs
 
@@ -750,13 +745,12 @@ def spectrum(
     plan.folder(work, "-o (its .cases folder)", "spectrum", recognise=lambda p: (p / "cases").is_dir())
     plan.check().prepare()
     n = len(freqs) * len(amps)
-    summary, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
-                                 lambda progress: run_spec(spec, Path("."), work, workers, scheduler, progress),
-                                 scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
     try:
-        ds = write_spectrum(summary, spec.spectrum, out)
-    except OSError as e:
-        _fail(f"-o {out}: cannot write the spectrum ({e})", 4)
+        ds, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
+                                lambda progress: run_spectrum(spec, out, workers, scheduler, progress),
+                                scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
+    except NotWritten as e:
+        _fail(f"-o {out}: cannot write the spectrum ({e.cause})", 4)
     console.print(spectrum_report(ds))
     console.print(f"wrote {out}, {out.with_suffix('.png')}, {out.with_suffix('.md')} (runs in {work})")
     for r in failed:

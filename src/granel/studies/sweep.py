@@ -484,6 +484,24 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
     return ds
 
 
+def sweep_study(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, scheduler: str | None = None,
+                progress=None) -> xr.Dataset:
+    """`granel sweep`: every case of `spec` (`run_spec`, which writes out_dir/summary.nc) and, in
+    spectrum mode, the spectrum beside the summary (`spectrum.write_spectrum`: spectrum.nc, .png
+    and .md). Returns the summary; a failed write of the spectrum is `guard.exits.NotWritten`."""
+    from ..guard.exits import NotWritten
+    from .spectrum import write_spectrum
+
+    ds = run_spec(spec, base_dir, out_dir, workers, scheduler, progress)
+    if spec.mode == "spectrum":
+        path = Path(out_dir) / "spectrum.nc"
+        try:
+            write_spectrum(ds, spec.spectrum, path)
+        except OSError as e:
+            raise NotWritten("the spectrum", path, e) from e
+    return ds
+
+
 def _key(spec_json: str, case: dict) -> str:
     return hashlib.sha1((spec_json + case["tag"]).encode()).hexdigest()[:16]
 
