@@ -15,7 +15,8 @@ import granel.studies.spectrum as SP
 import granel.studies.sweep as SW
 from granel import scenario as S
 from granel.analysis.reciprocity import reciprocity_metrics
-from granel.guard.exits import FILES, STOPPED, NotWritten
+from granel.guard.exits import FILES, STOPPED, GranelError, NotWritten
+from granel.guard.outputs import STAMP, OutputPlan, removed_if_refused
 from granel.io.results import read_netcdf
 from granel.studies.reciprocity import run_path, run_reciprocity
 
@@ -178,3 +179,60 @@ def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monk
         SW.sweep_study(spec, tmp_path, tmp_path / "out")
     assert calls == [("run", tmp_path / "out"), ("write", "summary", tmp_path / "out" / "spectrum.nc")]
     assert e.value.path == tmp_path / "out" / "spectrum.nc"
+
+
+# ------------------------------------------------------------------------- granel design
+
+
+def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
+    import granel.studies.design as D
+    import granel.studies.design_report as DR
+
+    calls = []
+
+    def run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=None, progress=None, check=True):
+        calls.append(("trials", trials, workers, scheduler, max_wall, check))
+        progress(0, "ok", 1, 1)
+        return {"study": "study", "files": ["trials.nc"]}
+
+    def write_study_report(spec, base_dir, study, out):
+        calls.append(("report", study))
+        return ["report.md"]
+
+    monkeypatch.setattr(D, "run_design", run_design)
+    monkeypatch.setattr(DR, "write_study_report", write_study_report)
+    res = DR.design_study("spec", tmp_path, tmp_path / "out", 3, 1, None, max_wall=9.0,
+                          progress=lambda *a: calls.append(("progress", a)),
+                          reporting=lambda: calls.append("reporting"))
+    assert calls == [("trials", 3, 1, None, 9.0, False), ("progress", (0, "ok", 1, 1)), "reporting",
+                     ("report", "study")]
+    assert res["files"] == ["trials.nc", "report.md"]
+
+
+@pytest.mark.parametrize("before", ["new", "empty", "written"])
+def test_a_refused_command_leaves_no_folder_it_made(tmp_path, before):
+    out = tmp_path / "out"
+    if before != "new":
+        out.mkdir()
+    if before == "written":
+        (out / "trials.nc").write_text("x")
+    with pytest.raises(GranelError), removed_if_refused(out):
+        plan = OutputPlan()
+        plan.folder(out, "--out", "design", recognise=lambda p: True)
+        plan.check().prepare()
+        raise GranelError("refused")
+    assert out.exists() == (before != "new")
+
+
+@pytest.mark.parametrize("how", ["wrote", "crashed"])
+def test_a_folder_is_removed_only_empty_and_only_on_a_refusal(tmp_path, how):
+    out = tmp_path / "out"
+    with pytest.raises(GranelError if how == "wrote" else RuntimeError), removed_if_refused(out):
+        plan = OutputPlan()
+        plan.folder(out, "--out", "design")
+        plan.check().prepare()
+        if how == "wrote":
+            (out / "trials.nc").write_text("x")
+            raise GranelError("refused")
+        raise RuntimeError("not a refusal")
+    assert (out / STAMP).exists()

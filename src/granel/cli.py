@@ -776,9 +776,9 @@ def design(
     if trials is not None and trials < 1:
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
-    from .studies.design import DesignFileError, check_design, load_design, run_design
-    from .studies.design_report import write_study_report
-    from .guard.outputs import STAMP, OutputPlan
+    from .guard.outputs import OutputPlan, removed_if_refused
+    from .studies.design import DesignFileError, check_design, load_design
+    from .studies.design_report import design_study
     from .studies.sweep import sweep_inputs
 
     try:
@@ -792,14 +792,12 @@ def design(
     plan.check()
     with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
         check_design(spec, base_dir)  # the fields, and that each variable reaches the runs: before any folder or bar
-    fresh = not out.exists()
-    plan.prepare()
-    target = trials or spec.trials
     failed = []
-    try:
+    with removed_if_refused(out):
+        plan.prepare()
         with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
-            task = bar.add_task(f"design {spec.name}", total=target)
+            task = bar.add_task(f"design {spec.name}", total=trials or spec.trials)
 
             def progress(number, status, done, total):
                 if status != "ok":
@@ -807,15 +805,9 @@ def design(
                 bar.update(task, completed=done)
 
             with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
-                res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
-                                 check=False)
-                bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
-                res["files"] += write_study_report(spec, base_dir, res["study"], out)
-    except (typer.Exit, GranelError):
-        if fresh and out.is_dir() and [p.name for p in out.iterdir()] == [STAMP]:
-            (out / STAMP).unlink()  # refused before anything was written (e.g. an unreachable scheduler): no folder left
-            out.rmdir()
-        raise
+                res = design_study(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
+                                   reporting=lambda: bar.update(task, description=f"design {spec.name}: re-evaluating "
+                                                                                  "the best designs"))
     ds = res["trials"]
     ok = int((ds["status"].values == "ok").sum())
     t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],
