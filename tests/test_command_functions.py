@@ -15,7 +15,7 @@ import granel.studies.spectrum as SP
 import granel.studies.sweep as SW
 from granel import scenario as S
 from granel.analysis.reciprocity import reciprocity_metrics
-from granel.guard.exits import FILES, STOPPED, GranelError, NotWritten
+from granel.guard.exits import FILES, STOPPED, GranelError, InputError, NotWritten
 from granel.guard.outputs import STAMP, OutputPlan, removed_if_refused
 from granel.io.results import read_netcdf
 from granel.studies.reciprocity import run_path, run_reciprocity
@@ -236,3 +236,34 @@ def test_a_folder_is_removed_only_empty_and_only_on_a_refusal(tmp_path, how):
             raise GranelError("refused")
         raise RuntimeError("not a refusal")
     assert (out / STAMP).exists()
+
+
+# ------------------------------------------------------------------------- granel paper, bench, export
+
+
+def test_paper_run_count_is_what_the_study_reports():
+    from granel.studies.paper import CASES, run_count
+
+    lsgm = [c for c in CASES if c[1] == "LSGM:3"]
+    assert run_count(False) == len(CASES) == 12 and run_count(True) == 2 * len(CASES) + len(lsgm) == 30
+
+
+def test_bench_check_duration_refuses_what_the_cases_cannot_run():
+    from granel.studies.benchmark import check_duration
+
+    check_duration("2us")
+    with pytest.raises(InputError, match="output intervals"):
+        check_duration("0.0123456789ms")
+    with pytest.raises(InputError, match="memory"):
+        check_duration("100s")
+
+
+def test_export_reports_its_progress_to_the_total(tmp_path):
+    from granel.analysis.result_model import result_solid
+    from granel.viz.export import count_steps, export_result
+
+    ds = R.load_result(R.run_to_file(rigid("SSGM:C"), tmp_path / "r.nc")["output"])
+    seen = []
+    export_result(ds, tmp_path / "exp", ["csv", "extxyz"], lambda done, total: seen.append((done, total)))
+    total = count_steps(ds, result_solid(ds), ["csv", "extxyz"])
+    assert seen == [(k, total) for k in range(total + 1)]

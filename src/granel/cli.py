@@ -395,7 +395,7 @@ def paper(
     workers: int = typer.Option(2, min=1, help="processes rendering the movies"),
 ):
     """Regenerate the paper: twelve cases, modal analysis, Figs. 1-11, animations, report.md."""
-    from .studies.paper import CASES, paper_study
+    from .studies.paper import paper_study, run_count
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
@@ -403,8 +403,7 @@ def paper(
     _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir() and any((p / "runs").glob("*.nc")))
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
-        # the twelve cases, their free-edge reruns and the six LSGM-shocked ones without the SSGM's outer wall
-        task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1) + (len(CASES) // 2 if free_edge else 0))
+        task = bar.add_task("paper cases", total=run_count(free_edge))
 
         def progress(what, info):
             if isinstance(what, tuple):
@@ -570,9 +569,8 @@ def _bench_duration(duration: str | None) -> None:
     if duration is None:
         return
     from .guard.exits import InputError
-    from .studies.paper import case_scenario
-    from .scenario.estimate import check_needs
     from .io.units import parse_time
+    from .studies.benchmark import check_duration
 
     try:
         t = parse_time(duration)
@@ -581,7 +579,7 @@ def _bench_duration(duration: str | None) -> None:
     if not (np.isfinite(t) and t > 0):
         _fail(f"--duration {duration!r}: give a positive simulated time, e.g. 0.1ms")
     try:
-        check_needs(case_scenario(("plate", "SSGM:C", "strong"), "paper", [f'simulation.duration="{duration}"']))
+        check_duration(duration)
     except InputError as e:
         _fail(f"--duration {duration}: {e}")
 
@@ -842,8 +840,7 @@ def export(
     the granules at every output and the plate's or beam's nodal displacement, velocity, element
     energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
     stored solid output."""
-    from .analysis.result_model import result_solid
-    from .viz.export import ExportError, count_steps, export_result, parse_formats, read_export_result
+    from .viz.export import ExportError, export_result, parse_formats, read_export_result
 
     try:
         formats = parse_formats(format_)
@@ -860,12 +857,12 @@ def export(
         _fail(str(e), e.code)
     _check_folder(out, "-o", "export", inputs=[result], recognise=lambda p: any(p.glob("*.pvd")) or
                   (p / "traces.csv").exists())
-    total = count_steps(ds, result_solid(ds, result), formats)
     try:
         with Progress(TextColumn("[bold]export"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                       TimeElapsedColumn(), console=console, transient=True) as bar:
-            task = bar.add_task("export", total=total)
-            written = export_result(ds, out, formats, tick=lambda: bar.advance(task))
+            task = bar.add_task("export", total=None)
+            written = export_result(ds, out, formats, lambda done, total: bar.update(task, completed=done, total=total),
+                                    name=result)
     except OSError as e:
         _fail(f"-o {out}: cannot write the export ({e})", 4)
     console.print(f"wrote {len(written)} files ({', '.join(formats)}) in {out}")

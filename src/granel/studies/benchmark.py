@@ -82,6 +82,15 @@ def fresh_run_seconds(case, duration: str | None = None) -> float:
         return time.perf_counter() - t0
 
 
+def check_duration(duration: str) -> None:
+    """Whether the cases can run for `duration`: the reference case under the paper's algorithm
+    loaded with it (the scenario's own checks: the step, the outputs) and its memory
+    (`scenario.estimate.check_needs`). InputError saying why not."""
+    from ..scenario.estimate import check_needs
+
+    check_needs(case_scenario(REFERENCE_CASE, "paper", [f'simulation.duration="{duration}"']))
+
+
 def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True, log=print) -> dict:
     from ..run import run_scenario
 
