@@ -170,7 +170,7 @@ def test_run_spectrum_runs_the_cases_beside_the_spectrum_then_writes_it(tmp_path
 def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(SW, "run_spec", lambda spec, base_dir, out, *a: calls.append(("run", out)) or "summary")
-    monkeypatch.setattr(SP, "write_spectrum", _written(calls))
+    monkeypatch.setattr(SW, "write_spectrum", _written(calls))
     plain = SW.SweepSpec.model_validate({"base": "paper", "axes": [{"field": "contact.mu", "values": [0.1]}]})
     assert SW.sweep_study(plain, tmp_path, tmp_path / "out") == "summary" and calls == [("run", tmp_path / "out")]
     calls.clear()

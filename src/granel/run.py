@@ -15,9 +15,10 @@ import numpy as np
 
 from . import scenario as S
 from .guard.exits import STOPPED, GranelError, NotWritten
-from .io.checkpoint import fingerprint
+from .io.checkpoint import CheckpointError, fingerprint
 from .coupling.driver import drive
 from .problem import Problem
+from .io.results import write_spec_netcdf
 from .io.run_result import base_attrs, trajectory_spec
 
 
@@ -106,9 +107,6 @@ def run_to_file(sc: S.Scenario, output, progress=None, checkpoint=None, resume=N
     atomically, remove the run's checkpoint (the result replaces it), and return the result's
     `summarize` with its `output`. A RuntimeError of the run is RunStopped (a checkpoint's
     CheckpointError passes as it is), a failed write NotWritten."""
-    from .io.checkpoint import CheckpointError
-    from .io.results import write_spec_netcdf
-
     try:
         spec = run_scenario(sc, progress, checkpoint=checkpoint, resume=resume, max_wall=max_wall, dataset=False)
     except CheckpointError:

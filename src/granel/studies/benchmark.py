@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenario.estimate import check_needs
 from .paper import CASES, case_scenario, case_tag
 
 # the three methods on the one core: the paper's algorithm, the fast method with its default
@@ -86,8 +87,6 @@ def check_duration(duration: str) -> None:
     """Whether the cases can run for `duration`: the reference case under the paper's algorithm
     loaded with it (the scenario's own checks: the step, the outputs) and its memory
     (`scenario.estimate.check_needs`). InputError saying why not."""
-    from ..scenario.estimate import check_needs
-
     check_needs(case_scenario(REFERENCE_CASE, "paper", [f'simulation.duration="{duration}"']))
 
 

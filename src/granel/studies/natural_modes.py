@@ -44,7 +44,7 @@ def scenario_modes(sc: S.Scenario, count: int, plot=None) -> ScenarioModes:
     each classified bending / axial / bulk (`classify_modes`). Only the granular system (for the
     contact points) and the solid are built: no static equilibrium. With `plot`, Fig. 6 (the mesh
     and modes 1, 4 and 7) is drawn there, so at least 7 modes are computed."""
-    from ..viz.plots import plot_modes
+    from ..viz.plots import plot_modes  # lazy: matplotlib only for --plot
 
     system, _, _ = S.build_granular(sc, sc.base)
     solid = S.build_solid(sc, system)

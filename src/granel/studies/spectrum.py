@@ -444,7 +444,7 @@ def run_spectrum(spec, path, workers: int = 2, scheduler: str | None = None, pro
     case. A failed write of the spectrum is `guard.exits.NotWritten`; an OSError of the runs'
     folder passes as it is."""
     from ..guard.exits import NotWritten
-    from .sweep import run_spec
+    from .sweep import run_spec  # lazy, as this module's other imports of granel (sweep imports this module)
 
     summary = run_spec(spec, Path("."), cases_folder(path), workers, scheduler, progress)
     try:

@@ -24,9 +24,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .. import __version__
 from .. import scenario as S
+from ..guard.exits import NotWritten
 from ..io.results import ResultFileError
 from .modes import ModeName, study_mode
-from .spectrum import FREQUENCY_FIELD, SpectrumSpec
+from .spectrum import FREQUENCY_FIELD, SpectrumSpec, write_spectrum
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
@@ -489,9 +490,6 @@ def sweep_study(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, sche
     """`granel sweep`: every case of `spec` (`run_spec`, which writes out_dir/summary.nc) and, in
     spectrum mode, the spectrum beside the summary (`spectrum.write_spectrum`: spectrum.nc, .png
     and .md). Returns the summary; a failed write of the spectrum is `guard.exits.NotWritten`."""
-    from ..guard.exits import NotWritten
-    from .spectrum import write_spectrum
-
     ds = run_spec(spec, base_dir, out_dir, workers, scheduler, progress)
     if spec.mode == "spectrum":
         path = Path(out_dir) / "spectrum.nc"
