@@ -232,9 +232,9 @@ def run(
 ):
     """Simulate a scenario and write its results to NetCDF."""
     _without_dask()
+    from .guard.exits import NotWritten
     from .io.checkpoint import CheckpointError
-    from .io.results import write_spec_netcdf
-    from .run import run_scenario, summarize
+    from .run import run_to_file
 
     ov = _overrides(solid, excite, duration, dt, solver, set_)
     implied = []
@@ -260,22 +260,14 @@ def run(
         def progress(t):
             bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms")
 
-        try:
-            ds = run_scenario(sc, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit, dataset=False)
+        try:  # a stopped run (run.RunStopped) ends with its own line, "run stopped: ...", exit 3
+            summary = run_to_file(sc, output, progress, checkpoint=ckpt, resume=resume, max_wall=wall_limit)
         except S.ScenarioError as e:
             _fail(str(e))
         except CheckpointError as e:
             _fail(str(e), e.code)
-        except RuntimeError as e:
-            _fail(f"run stopped: {e}", code=3)
-    try:
-        write_spec_netcdf(ds, output)
-    except OSError as e:
-        _fail(f"-o {output}: could not write the result: {e}", code=4)
-    if ckpt.exists() and (sc.simulation.checkpoint_every > 0 or resume is not None):
-        ckpt.unlink()  # finished: the result replaces this run's checkpoint
-    summary = summarize(ds)
-    summary["output"] = str(output)
+        except NotWritten as e:
+            _fail(f"-o {output}: could not write the result: {e.cause}", code=4)
     if json_summary:
         print(json.dumps(summary, indent=2))
     _print_summary(summary)
@@ -373,7 +365,7 @@ def modes(
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value"),
 ):
     """Natural periods and kinds (bending / axial / bulk) of the solid's modes."""
-    from .solid.modal import classify_modes, modal_analysis
+    from .studies.natural_modes import scenario_modes
 
     if count < 1:
         _fail(f"--count {count}: give a whole number of modes >= 1")
@@ -382,31 +374,14 @@ def modes(
         _fail(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or --solid beam")
     if plot is not None:
         _picture_output(plot, "--plot", _scenario_inputs(scenario, sc))
-    model = S.build_problem(sc).solid
-    want = max(count, 7 if plot else 0)
-    md = modal_analysis(model, min(want, model.ndof) if want < model.ndof else None)
-    n = min(count, md.count)
-    kinds = classify_modes(model, md, range(max(n, min(7, md.count))))
-    out = {
-        "solid": model.kind,
-        "dofs": model.ndof,
-        "elements": model.nelements,
-        "periods_ms": [float(p) for p in md.periods[:n] * 1e3],
-        "kinds": kinds[:n],
-        "modes_computed": md.count,
-    }
-    if plot:
-        from .viz.plots import plot_modes
-
-        which = tuple(k for k in (0, 3, 6) if k < md.count)
-        plot_modes(model, md, kinds, which, plot)
-        out["plot"] = str(plot)
+    res = scenario_modes(sc, count, plot)
     if json_out:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(res.summary(), indent=2))
         return
+    model, periods = res.solid, res.modes.periods
     t = Table("mode", "period [ms]", "frequency [kHz]", "kind", title=f"{model.kind}: {model.ndof} DOFs, {model.nelements} elements")
-    for k in range(n):
-        t.add_row(str(k + 1), f"{md.periods[k] * 1e3:.5f}", f"{1 / md.periods[k] / 1e3:.3f}", kinds[k])
+    for k in range(res.shown):
+        t.add_row(str(k + 1), f"{periods[k] * 1e3:.5f}", f"{1 / periods[k] / 1e3:.3f}", res.kinds[k])
     Console().print(t)
 
 
@@ -420,7 +395,7 @@ def paper(
     workers: int = typer.Option(2, min=1, help="processes rendering the movies"),
 ):
     """Regenerate the paper: twelve cases, modal analysis, Figs. 1-11, animations, report.md."""
-    from .studies.paper import CASES, paper_study
+    from .studies.paper import paper_study, run_count
 
     if solver not in ("fast", "paper"):
         _fail(f"--solver {solver!r}: choose fast or paper")
@@ -428,8 +403,7 @@ def paper(
     _check_folder(out, "--out", "paper", recognise=lambda p: (p / "runs").is_dir() and any((p / "runs").glob("*.nc")))
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=console) as bar:
-        # the twelve cases, their free-edge reruns and the six LSGM-shocked ones without the SSGM's outer wall
-        task = bar.add_task("paper cases", total=len(CASES) * (2 if free_edge else 1) + (len(CASES) // 2 if free_edge else 0))
+        task = bar.add_task("paper cases", total=run_count(free_edge))
 
         def progress(what, info):
             if isinstance(what, tuple):
@@ -464,10 +438,8 @@ def reciprocity(
     json_out: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
 ):
     """Run both directions (shock at A measured at B, and the reverse) and compare."""
-    from .analysis.reciprocity import reciprocity_metrics
-    from .viz.figures import fig3_velocities
-    from .io.results import write_netcdf
-    from .run import run_scenario
+    from .guard.exits import NotWritten
+    from .studies.reciprocity import run_reciprocity
 
     if a == b:
         _fail(f"--a and --b are both {a!r}: give two different granules")
@@ -483,25 +455,12 @@ def reciprocity(
     check_disk(sum(run_needs(sc).result for sc in scs.values()), out, f"--out {out}: the two runs")
     _check_folder(out, "--out", "reciprocity", inputs=(S.scenario_file(scenario), *S.referenced_files(sc0)),
                   recognise=lambda p: any(is_granel_file(f) for f in p.glob("shock-*.nc")))
-    runs = {}
-    for exc, sc in scs.items():
-        try:
-            with console.status(f"running with the shock on {exc}"):
-                ds = run_scenario(sc)
-        except S.ScenarioError as e:
-            _fail(str(e))
-        except RuntimeError as e:
-            _fail(f"run with the shock on {exc} stopped: {e}", 3)
-        try:
-            write_netcdf(ds, out / f"shock-{exc.replace(':', '')}.nc")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the run ({e})", 4)
-        runs[exc] = ds
-    m = reciprocity_metrics(runs[b], runs[a])
-    try:
-        fig3_velocities(runs[b], runs[a], out / "fig3_velocities")
-    except OSError as e:
-        _fail(f"--out {out}: cannot write the figure ({e})", 4)
+    try:  # a stopped run (run.RunStopped) ends with its own line, exit 3
+        _, m = run_reciprocity(scs, out, running=lambda exc: console.status(f"running with the shock on {exc}"))
+    except S.ScenarioError as e:
+        _fail(str(e))
+    except NotWritten as e:
+        _fail(f"--out {out}: cannot write {e.what} ({e.cause})", 4)
     if json_out:
         print(json.dumps(m, indent=2, default=float))
         return
@@ -610,9 +569,8 @@ def _bench_duration(duration: str | None) -> None:
     if duration is None:
         return
     from .guard.exits import InputError
-    from .studies.paper import case_scenario
-    from .scenario.estimate import check_needs
     from .io.units import parse_time
+    from .studies.benchmark import check_duration
 
     try:
         t = parse_time(duration)
@@ -621,7 +579,7 @@ def _bench_duration(duration: str | None) -> None:
     if not (np.isfinite(t) and t > 0):
         _fail(f"--duration {duration!r}: give a positive simulated time, e.g. 0.1ms")
     try:
-        check_needs(case_scenario(("plate", "SSGM:C", "strong"), "paper", [f'simulation.duration="{duration}"']))
+        check_duration(duration)
     except InputError as e:
         _fail(f"--duration {duration}: {e}")
 
@@ -669,7 +627,8 @@ def sweep(
     """Run a parameter sweep on dask.distributed; re-running skips finished cases.
     Exit code 3 if any case failed."""
     _check_workers(workers)
-    from .studies.sweep import SweepFileError, cases, load_sweep, run_sweep, sweep_inputs
+    from .guard.exits import NotWritten
+    from .studies.sweep import SweepFileError, cases, load_sweep, sweep_inputs, sweep_study
 
     try:
         spec, base_dir = load_sweep(sweep_file)
@@ -687,8 +646,12 @@ def sweep(
             plan.file(out / f"spectrum{suffix}", f"--out (its spectrum{suffix})")
     plan.check().prepare()
     n = len(cases(spec))
-    ds, failed = _run_cases(f"sweep {spec.name}", n, lambda progress: run_sweep(sweep_file, out, workers, scheduler, progress),
-                            scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
+    try:
+        ds, failed = _run_cases(f"sweep {spec.name}", n,
+                                lambda progress: sweep_study(spec, base_dir, out, workers, scheduler, progress),
+                                scheduler, sweep_file, f"--out {out}: cannot write the sweep's results")
+    except NotWritten as e:
+        _fail(f"--out {out}: cannot write the spectrum ({e.cause})", 4)
     metrics = [v for v in ds.data_vars if v != "status"]
     t = Table("metric", "min", "median", "max", title=f"sweep {spec.name}: {n} cases, {n - len(failed)} ok, {len(failed)} failed")
     for m in metrics:
@@ -700,12 +663,6 @@ def sweep(
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")
     console.print(f"summary: {out / 'summary.nc'}")
     if spec.mode == "spectrum":
-        from .studies.spectrum import write_spectrum
-
-        try:
-            write_spectrum(ds, spec.spectrum, out / "spectrum.nc")
-        except OSError as e:
-            _fail(f"--out {out}: cannot write the spectrum ({e})", 4)
         console.print(f"spectrum: {out / 'spectrum.nc'}, {out / 'spectrum.png'}, {out / 'spectrum.md'}")
     if failed:
         _fail(f"{len(failed)} of {n} cases failed (listed above; their status is in {out / 'summary.nc'}); "
@@ -739,8 +696,10 @@ def spectrum(
     Exit code 3 if any run failed."""
     from pydantic import ValidationError
 
-    from .studies.spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, parse_amplitudes, parse_frequencies, spectrum_report, write_spectrum
-    from .studies.sweep import SweepSpec, cases, check_mode, run_spec
+    from .guard.exits import NotWritten
+    from .studies.spectrum import (cases_folder, parse_amplitudes, parse_frequencies, run_spectrum, spectrum_report,
+                                   spectrum_sweep)
+    from .studies.sweep import cases, check_mode
 
     _check_workers(workers)
     for name, value in (("--cycles", cycles), ("--window-cycles", window_cycles), ("--ramp-cycles", ramp_cycles)):
@@ -754,21 +713,15 @@ def spectrum(
         amps = parse_amplitudes(amplitudes)
     except ValueError as e:
         _fail(f"--amplitudes {amplitudes}: {e}")
-    source = Path(scenario)
     if scenario not in S.builtin_names():
         from .guard.reading import check_file
 
-        if not os.path.lexists(source):  # neither a file nor a built-in name
+        if not os.path.lexists(scenario):  # neither a file nor a built-in name
             _fail(f"{scenario}: no such scenario file or built-in scenario ({', '.join(S.builtin_names())})")
-        check_file(source, "scenario")  # a folder, a FIFO, a dangling link, ...: exit 2 or 4 naming it
-    base = scenario if scenario in S.builtin_names() else str(source.resolve())
+        check_file(Path(scenario), "scenario")  # a folder, a FIFO, a dangling link, ...: exit 2 or 4 naming it
     try:
-        spec = SweepSpec.model_validate({
-            "name": f"spectrum of {source.stem if scenario not in S.builtin_names() else scenario}", "base": base,
-            "overrides": list(set_), "mode": "spectrum",
-            "spectrum": {"drive": drive, "measure": measure, "both_directions": both_directions, "cycles": cycles,
-                         "window_cycles": window_cycles, "ramp_cycles": ramp_cycles, "samples_per_period": samples},
-            "axes": [{"field": FREQUENCY_FIELD, "values": freqs}, {"field": AMPLITUDE_FIELD, "values": amps}]})
+        spec = spectrum_sweep(scenario, set_, freqs, amps, drive=drive, measure=measure, both_directions=both_directions,
+                              cycles=cycles, window_cycles=window_cycles, ramp_cycles=ramp_cycles, samples_per_period=samples)
     except ValidationError as e:
         _fail(S._format_validation_error(e).replace("invalid scenario", "invalid option").replace("spectrum.", "--")
               .replace("samples_per_period", "samples").replace("_", "-"))
@@ -779,7 +732,7 @@ def spectrum(
     except S.ScenarioError as e:
         msg = str(e).replace("spectrum.drive", "--drive").replace("spectrum.measure", "--measure")
         _fail(msg if scenario in msg or "--drive" in msg or "--measure" in msg else f"{scenario}: {msg}")
-    work = out.with_suffix(".cases")
+    work = cases_folder(out)
     from .guard.outputs import OutputPlan
     from .studies.sweep import sweep_inputs
 
@@ -790,13 +743,12 @@ def spectrum(
     plan.folder(work, "-o (its .cases folder)", "spectrum", recognise=lambda p: (p / "cases").is_dir())
     plan.check().prepare()
     n = len(freqs) * len(amps)
-    summary, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
-                                 lambda progress: run_spec(spec, Path("."), work, workers, scheduler, progress),
-                                 scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
     try:
-        ds = write_spectrum(summary, spec.spectrum, out)
-    except OSError as e:
-        _fail(f"-o {out}: cannot write the spectrum ({e})", 4)
+        ds, failed = _run_cases(f"spectrum: {n} cases x {2 if both_directions else 1} direction(s)", n,
+                                lambda progress: run_spectrum(spec, out, workers, scheduler, progress),
+                                scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
+    except NotWritten as e:
+        _fail(f"-o {out}: cannot write the spectrum ({e.cause})", 4)
     console.print(spectrum_report(ds))
     console.print(f"wrote {out}, {out.with_suffix('.png')}, {out.with_suffix('.md')} (runs in {work})")
     for r in failed:
@@ -822,9 +774,9 @@ def design(
     if trials is not None and trials < 1:
         _fail(f"--trials {trials}: give a whole number of trials >= 1")
     budget = _wall_seconds(timeout, "--timeout")
-    from .studies.design import DesignFileError, check_design, load_design, run_design
-    from .studies.design_report import write_study_report
-    from .guard.outputs import STAMP, OutputPlan
+    from .guard.outputs import OutputPlan, removed_if_refused
+    from .studies.design import DesignFileError, check_design, load_design
+    from .studies.design_report import design_study
     from .studies.sweep import sweep_inputs
 
     try:
@@ -838,14 +790,12 @@ def design(
     plan.check()
     with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
         check_design(spec, base_dir)  # the fields, and that each variable reaches the runs: before any folder or bar
-    fresh = not out.exists()
-    plan.prepare()
-    target = trials or spec.trials
     failed = []
-    try:
+    with removed_if_refused(out):
+        plan.prepare()
         with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=console) as bar:
-            task = bar.add_task(f"design {spec.name}", total=target)
+            task = bar.add_task(f"design {spec.name}", total=trials or spec.trials)
 
             def progress(number, status, done, total):
                 if status != "ok":
@@ -853,15 +803,9 @@ def design(
                 bar.update(task, completed=done)
 
             with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
-                res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
-                                 check=False)
-                bar.update(task, description=f"design {spec.name}: re-evaluating the best designs")
-                res["files"] += write_study_report(spec, base_dir, res["study"], out)
-    except (typer.Exit, GranelError):
-        if fresh and out.is_dir() and [p.name for p in out.iterdir()] == [STAMP]:
-            (out / STAMP).unlink()  # refused before anything was written (e.g. an unreachable scheduler): no folder left
-            out.rmdir()
-        raise
+                res = design_study(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
+                                   reporting=lambda: bar.update(task, description=f"design {spec.name}: re-evaluating "
+                                                                                  "the best designs"))
     ds = res["trials"]
     ok = int((ds["status"].values == "ok").sum())
     t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],
@@ -896,8 +840,7 @@ def export(
     the granules at every output and the plate's or beam's nodal displacement, velocity, element
     energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
     stored solid output."""
-    from .analysis.result_model import result_solid
-    from .viz.export import ExportError, count_steps, export_result, parse_formats, read_export_result
+    from .viz.export import ExportError, export_result, parse_formats, read_export_result
 
     try:
         formats = parse_formats(format_)
@@ -914,12 +857,12 @@ def export(
         _fail(str(e), e.code)
     _check_folder(out, "-o", "export", inputs=[result], recognise=lambda p: any(p.glob("*.pvd")) or
                   (p / "traces.csv").exists())
-    total = count_steps(ds, result_solid(ds, result), formats)
     try:
         with Progress(TextColumn("[bold]export"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                       TimeElapsedColumn(), console=console, transient=True) as bar:
-            task = bar.add_task("export", total=total)
-            written = export_result(ds, out, formats, tick=lambda: bar.advance(task))
+            task = bar.add_task("export", total=None)
+            written = export_result(ds, out, formats, lambda done, total: bar.update(task, completed=done, total=total),
+                                    name=result)
     except OSError as e:
         _fail(f"-o {out}: cannot write the export ({e})", 4)
     console.print(f"wrote {len(written)} files ({', '.join(formats)}) in {out}")

@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from . import scenario as S
-from .io.checkpoint import fingerprint
+from .guard.exits import STOPPED, GranelError, NotWritten
+from .io.checkpoint import CheckpointError, fingerprint
 from .coupling.driver import drive
 from .problem import Problem
+from .io.results import write_spec_netcdf
 from .io.run_result import base_attrs, trajectory_spec
 
 
@@ -87,6 +89,40 @@ def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, ma
                  dataset: bool = True):
     """Run a validated scenario and return its result Dataset (or `io.results.ResultSpec`)."""
     return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
+
+
+class RunStopped(GranelError):
+    """A run that its solver, the driver or a guard stopped (exit 3): "`what` stopped: the
+    RuntimeError" (the error is the cause)."""
+
+    code = STOPPED
+
+    def __init__(self, what: str, cause: BaseException):
+        super().__init__(f"{what} stopped: {cause}")
+
+
+def run_to_file(sc: S.Scenario, output, progress=None, checkpoint=None, resume=None,
+                max_wall: float | None = None) -> dict:
+    """Run a validated scenario (`run_scenario`, without xarray), write its result to `output`
+    atomically, remove the run's checkpoint (the result replaces it), and return the result's
+    `summarize` with its `output`. A RuntimeError of the run is RunStopped (a checkpoint's
+    CheckpointError passes as it is), a failed write NotWritten."""
+    try:
+        spec = run_scenario(sc, progress, checkpoint=checkpoint, resume=resume, max_wall=max_wall, dataset=False)
+    except CheckpointError:
+        raise
+    except RuntimeError as e:
+        raise RunStopped("run", e) from e
+    try:
+        write_spec_netcdf(spec, output)
+    except OSError as e:
+        raise NotWritten("the result", output, e) from e
+    ckpt = None if checkpoint is None else Path(checkpoint)
+    if ckpt is not None and ckpt.exists() and (sc.simulation.checkpoint_every > 0 or resume is not None):
+        ckpt.unlink()  # the result replaces the checkpoint this run wrote or resumed from
+    summary = summarize(spec)
+    summary["output"] = str(output)
+    return summary
 
 
 def built_models(sc: S.Scenario):

@@ -43,6 +43,18 @@ class FileError(GranelError, OSError):
     code = FILES
 
 
+class NotWritten(GranelError):
+    """An output that could not be written (exit 4): `what` names it ("the result", "the
+    figure"), `path` is where, `cause` the OSError. Not itself an OSError, so that an `except
+    OSError` around a study's other writes does not take it for theirs."""
+
+    code = FILES
+
+    def __init__(self, what: str, path, cause: OSError):
+        super().__init__(f"{path}: cannot write {what} ({cause})")
+        self.what, self.path, self.cause = what, path, cause
+
+
 class ResourceError(InputError):
     """A request whose estimated memory, disk or size exceeds what the machine has or a limit
     (exit 2), refused before anything is spent."""

@@ -16,6 +16,7 @@ import json
 import os
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -222,6 +223,23 @@ class OutputPlan:
         return self
 
 
+@contextmanager
+def removed_if_refused(folder: Path):
+    """Around a command's work on output folder `folder`, prepared inside the block: when the
+    block ends in a GranelError and the folder, new before it, holds only its stamp, remove the
+    folder, so that a command refused before writing anything (e.g. by an unreachable
+    scheduler) leaves no folder behind."""
+    folder = Path(folder)
+    fresh = not folder.exists()
+    try:
+        yield
+    except GranelError:
+        if fresh and folder.is_dir() and [p.name for p in folder.iterdir()] == [STAMP]:
+            (folder / STAMP).unlink()
+            folder.rmdir()
+        raise
+
+
 def stamp_folder(folder: Path, kind: str) -> None:
     """Mark `folder` as made by granel for `kind` (a command's outputs); idempotent."""
     from .. import __version__
@@ -239,4 +257,5 @@ def owned_by(folder: Path, kind: str) -> bool:
     return held is not None and held.get("kind") == kind
 
 
-__all__ = ["OutputPathError", "OutputPlan", "STAMP", "check_folder_writable", "check_name_lengths", "owned_by"]
+__all__ = ["OutputPathError", "OutputPlan", "STAMP", "check_folder_writable", "check_name_lengths", "owned_by",
+           "removed_if_refused"]

@@ -290,8 +290,12 @@ def check_times(sim) -> None:
 
 def build_solid(sc: Scenario, system) -> SolidModel:
     """The scenario's solid; one contact point per granule-solid contact of `system`, in the
-    same order (names are the granule labels)."""
-    return build_solid_model(solid_recipe(sc, system))
+    same order (names are the granule labels). ScenarioError "solid: ..." for a solid that
+    cannot be built (a contact on a clamped node, layers that overlap, ...)."""
+    try:
+        return build_solid_model(solid_recipe(sc, system))
+    except ValueError as e:
+        raise ScenarioError(f"solid: {e}") from None
 
 
 def solid_recipe(sc: Scenario, system) -> SolidRecipe:
@@ -334,10 +338,7 @@ def build_problem(sc: Scenario) -> Problem:
     """Everything a solver needs, built from the validated scenario."""
     text = to_toml(sc)
     system, state, _ = build_granular(sc, sc.base)
-    try:
-        solid = build_solid(sc, system)
-    except ValueError as e:  # a contact on a clamped node, layers that overlap, ...
-        raise ScenarioError(f"solid: {e}") from None
+    solid = build_solid(sc, system)
     force0, report, table = None, None, None
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenario.estimate import check_needs
 from .paper import CASES, case_scenario, case_tag
 
 # the three methods on the one core: the paper's algorithm, the fast method with its default
@@ -80,6 +81,13 @@ def fresh_run_seconds(case, duration: str | None = None) -> float:
         t0 = time.perf_counter()
         subprocess.run(cmd, check=True, capture_output=True)
         return time.perf_counter() - t0
+
+
+def check_duration(duration: str) -> None:
+    """Whether the cases can run for `duration`: the reference case under the paper's algorithm
+    loaded with it (the scenario's own checks: the step, the outputs) and its memory
+    (`scenario.estimate.check_needs`). InputError saying why not."""
+    check_needs(case_scenario(REFERENCE_CASE, "paper", [f'simulation.duration="{duration}"']))
 
 
 def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True, log=print) -> dict:

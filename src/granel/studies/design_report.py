@@ -441,3 +441,17 @@ def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path) -> li
             figures.append(fig)
     return [*figures, write_report(spec, study, rows, figures, out, modal)]
 
+
+def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None = None, workers: int = 2,
+                 scheduler: str | None = None, max_wall: float | None = None, progress=None, reporting=None) -> dict:
+    """`granel design`: run (or continue) the study (`design.run_design`, the design already
+    checked by `check_design`), then write its report (`write_study_report`). Returns
+    run_design's dict, the report's files added to its "files". `progress` as run_design's;
+    `reporting()` is called once the trials are done, before the report."""
+    from .design import run_design  # looked up when called: a test may stand in for the engine
+
+    res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False)
+    if reporting is not None:
+        reporting()
+    res["files"] += write_study_report(spec, base_dir, res["study"], out)
+    return res

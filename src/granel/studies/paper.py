@@ -277,6 +277,14 @@ def movie_jobs(out: Path, frames: int) -> list[tuple]:
             for c in CASES for field in ("deformation", "energy-density")]
 
 
+def run_count(free_edge: bool = True) -> int:
+    """The runs `paper_study` reports one by one to its progress: the twelve cases and, with
+    `free_edge`, their reruns without the outer walls and the LSGM-shocked cases without the
+    SSGM's outer wall."""
+    variants = len(CASES) + sum(case[1].startswith("LSGM") for case in CASES) if free_edge else 0
+    return len(CASES) + variants
+
+
 def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, progress=None, extra=(), frames=120,
                 free_edge=True, fig11_window=FIG11_WINDOW, workers=2) -> dict:
     """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's

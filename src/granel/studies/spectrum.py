@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
@@ -400,8 +401,6 @@ def spectrum_report(ds: xr.Dataset) -> str:
 def write_spectrum(summary: xr.Dataset, spec: SpectrumSpec, path) -> xr.Dataset:
     """A spectrum sweep's outputs beside each other, each written atomically: PATH (.nc, the
     `spectrum_dataset`), its figure (.png) and its report (.md). Returns the Dataset."""
-    from pathlib import Path
-
     from ..guard.owners import text_mark
     from ..guard.writing import write_text
     from ..io.results import write_netcdf
@@ -412,3 +411,43 @@ def write_spectrum(summary: xr.Dataset, spec: SpectrumSpec, path) -> xr.Dataset:
     plot_spectrum(ds, path.with_suffix(".png"))
     write_text(path.with_suffix(".md"), text_mark("<!--") + "\n" + spectrum_report(ds))
     return ds
+
+
+# ---------------------------------------------------------------- the `granel spectrum` study
+
+def spectrum_sweep(scenario: str, overrides, frequencies, amplitudes, **settings):
+    """The sweep behind `granel spectrum`: `scenario` (a built-in name, or a file, then given by
+    its absolute path) with `overrides`, in spectrum mode with `settings` (`SpectrumSpec`'s
+    fields), over its first excitation's frequencies x amplitudes. pydantic's ValidationError for
+    invalid settings."""
+    from .. import scenario as S
+    from .sweep import SweepSpec
+
+    builtin = scenario in S.builtin_names()
+    return SweepSpec.model_validate({
+        "name": f"spectrum of {scenario if builtin else Path(scenario).stem}",
+        "base": scenario if builtin else str(Path(scenario).resolve()), "overrides": list(overrides), "mode": "spectrum",
+        "spectrum": settings,
+        "axes": [{"field": FREQUENCY_FIELD, "values": list(frequencies)},
+                 {"field": AMPLITUDE_FIELD, "values": list(amplitudes)}]})
+
+
+def cases_folder(path):
+    """Where `run_spectrum` keeps the runs of the spectrum written to `path`: PATH with .cases."""
+    return Path(path).with_suffix(".cases")
+
+
+def run_spectrum(spec, path, workers: int = 2, scheduler: str | None = None, progress=None) -> xr.Dataset:
+    """Run every case of the spectrum sweep `spec` (`sweep.run_spec`, its files relative to the
+    working folder; finished runs in `cases_folder(path)` are reused), then write the spectrum
+    (`write_spectrum`: PATH, its .png and .md) and return it. `progress(case result)` after each
+    case. A failed write of the spectrum is `guard.exits.NotWritten`; an OSError of the runs'
+    folder passes as it is."""
+    from ..guard.exits import NotWritten
+    from .sweep import run_spec  # lazy, as this module's other imports of granel (sweep imports this module)
+
+    summary = run_spec(spec, Path("."), cases_folder(path), workers, scheduler, progress)
+    try:
+        return write_spectrum(summary, spec.spectrum, path)
+    except OSError as e:
+        raise NotWritten("the spectrum", path, e) from e

@@ -24,9 +24,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .. import __version__
 from .. import scenario as S
+from ..guard.exits import NotWritten
 from ..io.results import ResultFileError
 from .modes import ModeName, study_mode
-from .spectrum import FREQUENCY_FIELD, SpectrumSpec
+from .spectrum import FREQUENCY_FIELD, SpectrumSpec, write_spectrum
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
@@ -481,6 +482,21 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
 
     with dask.config.set(scheduler="synchronous"):  # a plain file lock, whatever client is around
         write_netcdf(ds, out / "summary.nc")
+    return ds
+
+
+def sweep_study(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, scheduler: str | None = None,
+                progress=None) -> xr.Dataset:
+    """`granel sweep`: every case of `spec` (`run_spec`, which writes out_dir/summary.nc) and, in
+    spectrum mode, the spectrum beside the summary (`spectrum.write_spectrum`: spectrum.nc, .png
+    and .md). Returns the summary; a failed write of the spectrum is `guard.exits.NotWritten`."""
+    ds = run_spec(spec, base_dir, out_dir, workers, scheduler, progress)
+    if spec.mode == "spectrum":
+        path = Path(out_dir) / "spectrum.nc"
+        try:
+            write_spectrum(ds, spec.spectrum, path)
+        except OSError as e:
+            raise NotWritten("the spectrum", path, e) from e
     return ds
 
 

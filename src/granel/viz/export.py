@@ -374,17 +374,27 @@ def write_csv(ds, stage: Path, tick: Callable[[], None]) -> list[str]:
 # --------------------------------------------------------------------------------------------
 
 
-def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS, tick: Callable[[], None] | None = None) -> list[Path]:
-    """Write the chosen `formats` of result `ds` into folder `out` (created if missing); returns
-    the paths written. `tick` is called once per frame or table written (see `count_steps`).
-    OSError when the folder cannot be written (what was already moved into place stays)."""
+def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS,
+                  progress: Callable[[int, int], None] | None = None, name="result") -> list[Path]:
+    """Write the chosen `formats` of result `ds` (named `name` in errors) into folder `out`
+    (created if missing); returns the paths written. `progress(done, total)` is called before the
+    first and after each frame or table written (`count_steps` of them). OSError when the folder
+    cannot be written (what was already moved into place stays)."""
     from ..analysis.result_model import result_solid, result_system
 
-    tick = tick or (lambda: None)
     formats = [f for f in FORMATS if f in set(formats)]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    system, model = result_system(ds), result_solid(ds)
+    system, model = result_system(ds, name), result_solid(ds, name)
+    total, done = count_steps(ds, model, formats), 0
+    progress = progress or (lambda done, total: None)
+    progress(0, total)
+
+    def tick():
+        nonlocal done
+        done += 1
+        progress(done, total)
+
     from ..guard.resources import check_disk
 
     check_disk(export_size(ds, model, formats), out, f"the export to {out}")
