@@ -130,7 +130,7 @@ def test_an_unbuildable_solid_is_a_scenario_error_naming_the_solid(monkeypatch):
 
 
 def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude(tmp_path, monkeypatch):
-    spec = SP.spectrum_sweep("paper", ['solid.kind="rigid"'], [1e3, 2e3], [10.0], drive="LSGM:3", measure="SSGM:C",
+    spec = SW.spectrum_sweep("paper", ['solid.kind="rigid"'], [1e3, 2e3], [10.0], drive="LSGM:3", measure="SSGM:C",
                              both_directions=True, cycles=20.0, window_cycles=5.0, ramp_cycles=2.0,
                              samples_per_period=16)
     assert spec.mode == "spectrum" and spec.overrides == ['solid.kind="rigid"']
@@ -140,9 +140,9 @@ def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude
     from pydantic import ValidationError
 
     with pytest.raises(ValidationError, match="window"):
-        SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C", cycles=4.0)
+        SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C", cycles=4.0)
     monkeypatch.chdir(tmp_path)
-    spec = SP.spectrum_sweep("mine.toml", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    spec = SW.spectrum_sweep("mine.toml", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     assert (spec.name, spec.base) == ("spectrum of mine", str(tmp_path.resolve() / "mine.toml"))  # by its absolute path
 
 
@@ -157,13 +157,13 @@ def _written(calls):
 def test_run_spectrum_runs_the_cases_beside_the_spectrum_then_writes_it(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(SW, "run_spec", lambda spec, base, out, *a: calls.append(("run", base, out)) or "summary")
-    monkeypatch.setattr(SP, "write_spectrum", _written(calls))
-    spec = SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    monkeypatch.setattr(SW, "write_spectrum", _written(calls))
+    spec = SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     path = tmp_path / "sp.nc"
     with pytest.raises(NotWritten) as e:
-        SP.run_spectrum(spec, path)
+        SW.run_spectrum(spec, path)
     assert calls == [("run", Path("."), tmp_path / "sp.cases"), ("write", "summary", path)]
-    assert SP.cases_folder(path) == tmp_path / "sp.cases"
+    assert SW.cases_folder(path) == tmp_path / "sp.cases"
     assert e.value.what == "the spectrum" and isinstance(e.value.cause, PermissionError)
 
 
@@ -174,7 +174,7 @@ def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monk
     plain = SW.SweepSpec.model_validate({"base": "paper", "axes": [{"field": "contact.mu", "values": [0.1]}]})
     assert SW.sweep_study(plain, tmp_path, tmp_path / "out") == "summary" and calls == [("run", tmp_path / "out")]
     calls.clear()
-    spec = SP.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    spec = SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     with pytest.raises(NotWritten) as e:
         SW.sweep_study(spec, tmp_path, tmp_path / "out")
     assert calls == [("run", tmp_path / "out"), ("write", "summary", tmp_path / "out" / "spectrum.nc")]

@@ -697,8 +697,8 @@ def spectrum(
     from pydantic import ValidationError
 
     from .guard.exits import NotWritten
-    from .studies.spectrum import (cases_folder, parse_amplitudes, parse_frequencies, run_spectrum, spectrum_report,
-                                   spectrum_sweep)
+    from .studies.spectrum import parse_amplitudes, parse_frequencies, spectrum_report
+    from .studies.sweep import cases_folder, run_spectrum, spectrum_sweep
     from .studies.sweep import cases, check_mode
 
     _check_workers(workers)

@@ -27,7 +27,7 @@ from .. import scenario as S
 from ..guard.exits import NotWritten
 from ..io.results import ResultFileError
 from .modes import ModeName, study_mode
-from .spectrum import FREQUENCY_FIELD, SpectrumSpec, write_spectrum
+from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, SpectrumSpec, write_spectrum
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
@@ -586,3 +586,37 @@ def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", 
         ax.set_title(", ".join(f"{k} = {v}" for k, v in sel.items()) or metric, fontsize=9)
     fig.tight_layout()
     return save(fig, output)
+
+
+# ---------------------------------------------------------------- the `granel spectrum` study
+
+def spectrum_sweep(scenario: str, overrides, frequencies, amplitudes, **settings):
+    """The sweep behind `granel spectrum`: `scenario` (a built-in name, or a file, then given by
+    its absolute path) with `overrides`, in spectrum mode with `settings` (`SpectrumSpec`'s
+    fields), over its first excitation's frequencies x amplitudes. pydantic's ValidationError for
+    invalid settings."""
+    builtin = scenario in S.builtin_names()
+    return SweepSpec.model_validate({
+        "name": f"spectrum of {scenario if builtin else Path(scenario).stem}",
+        "base": scenario if builtin else str(Path(scenario).resolve()), "overrides": list(overrides), "mode": "spectrum",
+        "spectrum": settings,
+        "axes": [{"field": FREQUENCY_FIELD, "values": list(frequencies)},
+                 {"field": AMPLITUDE_FIELD, "values": list(amplitudes)}]})
+
+
+def cases_folder(path):
+    """Where `run_spectrum` keeps the runs of the spectrum written to `path`: PATH with .cases."""
+    return Path(path).with_suffix(".cases")
+
+
+def run_spectrum(spec, path, workers: int = 2, scheduler: str | None = None, progress=None) -> xr.Dataset:
+    """Run every case of the spectrum sweep `spec` (`run_spec`, its files relative to the
+    working folder; finished runs in `cases_folder(path)` are reused), then write the spectrum
+    (`write_spectrum`: PATH, its .png and .md) and return it. `progress(case result)` after each
+    case. A failed write of the spectrum is `guard.exits.NotWritten`; an OSError of the runs'
+    folder passes as it is."""
+    summary = run_spec(spec, Path("."), cases_folder(path), workers, scheduler, progress)
+    try:
+        return write_spectrum(summary, spec.spectrum, path)
+    except OSError as e:
+        raise NotWritten("the spectrum", path, e) from e
