@@ -190,9 +190,11 @@ def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
 
     calls = []
 
-    def run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=None, progress=None, check=True):
+    def run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=None, progress=None, check=True,
+                   confirming=None):
         calls.append(("trials", trials, workers, scheduler, max_wall, check))
         progress(0, "ok", 1, 1)
+        confirming(1, 1)
         return {"study": "study", "files": ["trials.nc"]}
 
     def write_study_report(spec, base_dir, study, out):
@@ -203,8 +205,8 @@ def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
     monkeypatch.setattr(DR, "write_study_report", write_study_report)
     res = DR.design_study("spec", tmp_path, tmp_path / "out", 3, 1, None, max_wall=9.0,
                           progress=lambda *a: calls.append(("progress", a)),
-                          reporting=lambda: calls.append("reporting"))
-    assert calls == [("trials", 3, 1, None, 9.0, False), ("progress", (0, "ok", 1, 1)), "reporting",
+                          reporting=lambda: calls.append("reporting"), confirming=lambda *a: calls.append(("confirm", a)))
+    assert calls == [("trials", 3, 1, None, 9.0, False), ("progress", (0, "ok", 1, 1)), ("confirm", (1, 1)), "reporting",
                      ("report", "study")]
     assert res["files"] == ["trials.nc", "report.md"]
 

@@ -803,9 +803,14 @@ def design(
                 bar.update(task, completed=done)
 
             with _cluster_errors(scheduler, design_file, f"--out {out}: cannot write the study"):
+                def confirming(done, total):
+                    bar.update(task, description=f"design {spec.name}: confirming the best at full accuracy", completed=done,
+                               total=total)
+
                 res = design_study(spec, base_dir, out, trials, workers, scheduler, max_wall=budget, progress=progress,
                                    reporting=lambda: bar.update(task, description=f"design {spec.name}: re-evaluating "
-                                                                                  "the best designs"))
+                                                                                  "the best designs"),
+                                   confirming=confirming)
     ds = res["trials"]
     ok = int((ds["status"].values == "ok").sum())
     t = Table("trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables],

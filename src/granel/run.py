@@ -25,7 +25,8 @@ from .io.run_result import base_attrs, trajectory_spec
 def make_solver(problem: Problem, sparse: bool | None = None):
     """The solver of a built problem (`coupling.protocol.Solver`), its modes fetched: the fast
     method's exact integrator with the modes below its cut-off (for solids beyond
-    `solid.modal.DENSE_LIMIT` DOFs only those are computed, at most `problem.max_modes`);
+    `solid.modal.DENSE_LIMIT` DOFs, or with `simulation.modes = "below_cutoff"`, only those are
+    computed, at most `problem.max_modes` for the former);
     Newmark (the paper's method, or `integrator = "newmark"`) on all modes, none for a rigid
     solid, or sparse Newmark for solids too large for all modes (`sparse` forces either)."""
     from .coupling.modal import ModalSolver
@@ -40,6 +41,8 @@ def make_solver(problem: Problem, sparse: bool | None = None):
         modes = None
         if solid.ndof and large:
             modes = modes_below(solid, float(settings.mode_cutoff), problem.max_modes)
+        elif solid.ndof and settings.modes == "below_cutoff":
+            modes = modes_below(solid, float(settings.mode_cutoff))
         elif solid.ndof:
             modes = all_modes(solid)
         return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, problem.scales,
@@ -57,16 +60,20 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     """Solve a built problem and return its result Dataset (a `io.results.ResultSpec` with
     dataset=False: no xarray needed), after at most `max_wall` seconds of solving
     (`coupling.driver.WallTimeExceeded` beyond)."""
+    import time
+
     from .guard.fingerprints import encode
 
+    start = time.perf_counter()
     solver = make_solver(problem, sparse)
+    setup_s = time.perf_counter() - start
     # what a checkpoint resumes: the scenario, the method and the contents of the files it reads
     fp = fingerprint(problem.source + problem.settings.method + (encode(problem.inputs) if problem.inputs else ""))
     traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
     solid = problem.solid
     steps = traj.step_series("h")
     its = traj.step_series("iterations").astype(float)
-    info = {**traj.solver, "steps": int(len(steps)), "min_step": float(steps.min()) if len(steps) else problem.settings.dt,
+    info = {**traj.solver, "setup_s": setup_s, "steps": int(len(steps)), "min_step": float(steps.min()) if len(steps) else problem.settings.dt,
             "mean_iterations": float(its.mean()) if len(its) else 0.0, "max_iterations_used": int(its.max()) if len(its) else 0}
     attrs = base_attrs(problem.source, info)
     if problem.inputs:
@@ -87,8 +94,16 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
 
 def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, max_wall: float | None = None,
                  dataset: bool = True):
-    """Run a validated scenario and return its result Dataset (or `io.results.ResultSpec`)."""
-    return run_problem(S.build_problem(sc), progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
+    """Run a validated scenario and return its result Dataset (or `io.results.ResultSpec`); its
+    `build_s` attribute is the time building the problem took."""
+    import time
+
+    start = time.perf_counter()
+    problem = S.build_problem(sc)
+    build_s = time.perf_counter() - start
+    result = run_problem(problem, progress, checkpoint, resume, max_wall=max_wall, dataset=dataset)
+    result.attrs["build_s"] = build_s
+    return result
 
 
 class RunStopped(GranelError):

@@ -40,6 +40,7 @@ class SolverSettings:
     max_step: float = 1e-6  # [s]
     mode_cutoff: float | str = "auto"  # [Hz]: eigenmodes above are replaced by residual modes ("auto": granular.scales.auto_mode_cutoff)
     ledger_tol: float = 8e-7  # the energy balance (13) stays within this share of the largest load's energy
+    modes: str = "all"  # the exact integrator's eigenmodes: all (and residual modes from them) | below_cutoff
 
     def config(self, max_disp: float) -> core.CoupledConfig:
         paper = self.method == "paper"

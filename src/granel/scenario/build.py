@@ -319,9 +319,10 @@ def solid_recipe(sc: Scenario, system) -> SolidRecipe:
 
 def solver_settings(sc: Scenario) -> SolverSettings:
     sim = sc.simulation
-    return SolverSettings(sim.solver, sim.dt, sim.max_halvings, sim.lambda_max, sim.abstol, sim.reltol, sim.max_iterations,
-                          sim.integrator, sim.force_model, sim.adaptive, sim.rtol, sim.atol, sim.max_step, sim.mode_cutoff,
-                          sim.ledger_tol)
+    return SolverSettings(method=sim.solver, dt=sim.dt, halvings=sim.max_halvings, lambda_max=sim.lambda_max,
+                          abstol=sim.abstol, reltol=sim.reltol, max_iterations=sim.max_iterations, integrator=sim.integrator,
+                          force_model=sim.force_model, adaptive=sim.adaptive, rtol=sim.rtol, atol=sim.atol,
+                          max_step=sim.max_step, mode_cutoff=sim.mode_cutoff, ledger_tol=sim.ledger_tol, modes=sim.modes)
 
 
 def schedule(sc: Scenario) -> Schedule:

@@ -92,6 +92,7 @@ class SimulationSpec(_Strict):
         "auto", description="exact integrator: eigenmodes above this frequency [Hz] are replaced by residual modes; auto: "
         "from rtol and the stiffest solid contact (granular.scales.auto_mode_cutoff)")
     ledger_tol: float = Field(8e-7, gt=0, lt=1, description="exact integrator: the energy balance (13) stays within this share of the largest load's energy")
+    modes: Literal["all", "below_cutoff"] = Field("all", description="exact integrator: compute every eigenmode of the solid and the residual modes of those above mode_cutoff from them (all), or only the modes below mode_cutoff, by Lanczos, and the residual modes from a factorisation of K (below_cutoff: faster when the cut-off keeps few modes); solids beyond 8000 DOFs always take below_cutoff")
     equilibrate: bool = Field(False, description="start from the static equilibrium of the constant loads (preloads), granules and solid (granular.static)")
     balance_limit: float = Field(1e-2, gt=0, description="stop (exit 3) when the energy balance (13) is off by more than this share of the energy put in")
     overlap_limit: float = Field(0.1, gt=0, description="stop (exit 3) when a contact overlaps by more than this share of the smaller radius")

@@ -28,7 +28,7 @@ SOLID_FIELDS = {
     "none": {"kind"},
 }
 # the fast method's exact integrator alone reads these (`coupling.exact.solver.ExactSolver`)
-EXACT_ONLY = {"integrator", "force_model", "adaptive", "rtol", "atol", "ledger_tol", "max_step", "mode_cutoff"}
+EXACT_ONLY = {"integrator", "force_model", "adaptive", "rtol", "atol", "ledger_tol", "max_step", "mode_cutoff", "modes"}
 
 
 def unused_reason(sc: Scenario, path: str) -> str | None:

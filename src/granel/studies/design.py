@@ -248,6 +248,26 @@ def _metric(metrics: dict, name: str) -> float:
     return float(v)
 
 
+class ScreeningSpec(BaseModel):
+    """Multi-fidelity search: every trial runs at the looser accuracy of `overrides` (simulation
+    fields only: a screening changes how accurately a design is run, not the design), and the
+    `confirm` best trials are run again at the design's own accuracy; the best design is the
+    best of those."""
+
+    model_config = ConfigDict(extra="forbid")
+    overrides: list[str] = Field(min_length=1, description="the trials' accuracy, e.g. 'simulation.rtol=1e-4'")
+    confirm: int = Field(10, ge=1, le=1000, description="the best trials run again at the design's own accuracy")
+
+    @model_validator(mode="after")
+    def _accuracy_only(self):
+        for k, item in enumerate(self.overrides):
+            key = item.split("=", 1)[0].strip()
+            if "=" not in item or not key.startswith("simulation.") or key.count(".") != 1:
+                raise ValueError(f"overrides.{k} = {item!r}: a screening sets simulation fields only "
+                                 "(simulation.FIELD=VALUE): it changes the accuracy, not the design")
+        return self
+
+
 class DesignSpec(CaseSpec):
     name: str = "design"
     trials: int = Field(50, ge=1, le=100_000)
@@ -261,6 +281,8 @@ class DesignSpec(CaseSpec):
     frequencies: list[float] | None = Field(None, description="spectrum mode: the band's drive frequencies [Hz], "
                                                               "each a narrowband run (both directions if the "
                                                               "[spectrum] table says so)")
+    screening: ScreeningSpec | None = Field(None, description="trials at a looser accuracy, the best confirmed at the "
+                                                              "design's own")
 
     @model_validator(mode="after")
     def _design(self):
@@ -296,6 +318,12 @@ class DesignSpec(CaseSpec):
     def directions(self) -> list[str]:
         return [o.sense for o in self.objectives]
 
+    def screened(self) -> "DesignSpec":
+        """The design as its trials run it: its overrides, then the screening's."""
+        if self.screening is None:
+            return self
+        return self.model_copy(update={"overrides": [*self.overrides, *self.screening.overrides]})
+
 
 # the largest band of a spectrum-mode design (each frequency is a run, or two)
 MAX_BAND = 200
@@ -313,12 +341,15 @@ def evaluate_trial(spec_json: str, base_dir: str, case: dict, out_dir: str, keep
     if parts == [(case, "")]:  # the trial is its case: run_case's result as it is (its notes too)
         return _timed_case(spec_json, base_dir, case, out_dir, keep_runs)
     start = time.perf_counter()
-    res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0, "reused": True}
+    res = {"tag": case["tag"], "index": case["index"], "overrides": case["overrides"], "solver_s": 0.0, "reused": True,
+           "parts": {}}
     per = []
     for sub, where in parts:
         r = _timed_case(spec_json, base_dir, sub, out_dir, keep_runs)
         res["solver_s"] += float(r.get("solver_s", 0.0))
         res["reused"] = res["reused"] and r["reused"]
+        for k, v in r.get("parts", {}).items():
+            res["parts"][k] = res["parts"].get(k, 0.0) + float(v)
         if r.get("status") != "ok":
             res["status"] = f"{r.get('status')} ({where})"
             break
@@ -338,7 +369,7 @@ def _timed_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_ru
     r = run_case(spec_json, base_dir, case, out_dir, keep_runs)
     took = time.perf_counter() - start
     reused = float(r.get("wall_s", 0.0)) > took  # a fresh case's wall_s is measured within this call
-    return {**r, "reused": reused, **({"wall_s": took, "solver_s": 0.0} if reused else {})}
+    return {**r, "reused": reused, **({"wall_s": took, "solver_s": 0.0, "parts": {}} if reused else {})}
 
 
 def load_design(path) -> tuple[DesignSpec, Path]:
@@ -364,6 +395,11 @@ def check_design(spec: DesignSpec, base_dir: Path) -> None:
     scenario's, a value its schema refuses everywhere), or when no run depends on it
     (`check_variables_matter`, first: its reasons say more than a field check's)."""
     check_base(spec, base_dir)
+    if spec.screening is not None:
+        try:
+            S.load(spec.base_path(base_dir), spec.screened().overrides)
+        except S.ScenarioError as e:
+            raise DesignFileError(f"screening.overrides: the base scenario refuses them ({' '.join(str(e).split())})") from None
     check_variables_matter(spec, base_dir)
     check_mode(spec, base_dir, _probe_case(spec, {}))
     base = spec.base_path(base_dir)
@@ -762,6 +798,7 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
     trial.set_user_attr("reused", bool(result.get("reused", False)))
     for key in ("wall_s", "solver_s", "turnaround_s"):
         trial.set_user_attr(key, float(result.get(key, float("nan"))))
+    trial.set_user_attr("parts", {k: float(v) for k, v in result.get("parts", {}).items()})
     trial.set_user_attr("metrics", {k: float(v) for k, v in result.get("metrics", {}).items()
                                     if isinstance(v, (int, float))})
     trial.set_user_attr("reason", reason)
@@ -776,13 +813,94 @@ def tell(study, spec: DesignSpec, trial, result: dict) -> str:
     return reason
 
 
+def screened_ranking(spec: DesignSpec, study) -> list:
+    """The feasible finished trials, best first by their screened values: one objective by its
+    value, several by Pareto rank (the front first) and then the first objective."""
+    from optuna.trial import TrialState
+
+    ok = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+          if all(c <= 0 for c in t.user_attrs.get("constraints", []))]
+    signs = np.array([1.0 if d == "minimize" else -1.0 for d in spec.directions])
+    if not ok:
+        return []
+    v = np.array([t.values for t in ok], float) * signs
+    rank = np.zeros(len(ok), int)
+    left = set(range(len(ok)))
+    level = 0
+    while left:  # Pareto levels (one objective: each trial its own level, by value)
+        front = {k for k in left if not any(np.all(v[j] <= v[k]) and np.any(v[j] < v[k]) for j in left)}
+        for k in front:
+            rank[k] = level
+        left -= front
+        level += 1
+    order = sorted(range(len(ok)), key=lambda k: (rank[k], v[k, 0], ok[k].number))
+    return [ok[k] for k in order]
+
+
+def confirm_best(spec: DesignSpec, study, client, base_dir: str, out: Path, confirming=None) -> None:
+    """Run a screened study's `screening.confirm` best trials (`screened_ranking`) again at the
+    design's own accuracy, on the study's workers; each one's objective values, constraint
+    violations and reason go to the study's `confirmed` attribute (by trial number), so that a
+    rerun confirms only what is missing."""
+    if spec.screening is None:
+        return
+    from dask.distributed import as_completed
+
+    done = dict(study.user_attrs.get("confirmed", {}))
+    best = screened_ranking(spec, study)[: spec.screening.confirm]
+    todo = [t for t in best if str(t.number) not in done]
+    spec_json = spec.model_dump_json()  # the design's own accuracy
+    futures = {}
+    for t in todo:
+        case = trial_case(spec, t.number, t.params)
+        case["tag"] = f"{case['tag']}-confirmed"
+        futures[client.submit(evaluate_trial, spec_json, base_dir, case, str(out.resolve()), pure=False,
+                              key=f"granel-confirm-{t.number}-{time.time_ns()}")] = t
+    for k, fut in enumerate(as_completed(list(futures)), start=len(best) - len(todo) + 1):
+        t = futures[fut]
+        try:
+            r = dict(fut.result())
+        except Exception as e:  # noqa: BLE001 - a failed confirmation is recorded as failed
+            r = {"status": f"error: task failed: {type(e).__name__}: {e}"}
+        values, cons, reason = score(spec, r)
+        done[str(t.number)] = {"values": values, "constraints": cons, "reason": reason,
+                               "wall_s": float(r.get("wall_s", float("nan")))}
+        study.set_user_attr("confirmed", done)
+        if confirming is not None:
+            confirming(k, len(best))
+
+
+class ConfirmedTrial:
+    """A trial as a screened study reports it: its number, parameters and attributes, with the
+    objective values of its run at the design's own accuracy."""
+
+    def __init__(self, trial, values, constraints):
+        self._trial, self.values, self.constraints = trial, list(values), list(constraints)
+
+    def __getattr__(self, name):
+        return getattr(self._trial, name)
+
+
+def confirmed_trials(spec: DesignSpec, study) -> list:
+    """The confirmed trials of a screened study that ran ok at the design's own accuracy, as
+    `ConfirmedTrial`s, in their screened order."""
+    held = study.user_attrs.get("confirmed", {})
+    out = []
+    for t in screened_ranking(spec, study):
+        c = held.get(str(t.number))
+        if c is not None and c.get("values") is not None:
+            out.append(ConfirmedTrial(t, c["values"], c.get("constraints", [])))
+    return out
+
+
 def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
                scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
-               progress=None, check: bool = True) -> dict:
+               progress=None, check: bool = True, confirming=None) -> dict:
     """Run (or continue) the study until `trials` trials (default: the design's) have finished,
     on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
     trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
-    `check_design` runs first unless `check` is false (the caller ran it). Writes trials.nc and
+    `check_design` runs first unless `check` is false (the caller ran it). A screened design's
+    best trials are then confirmed (`confirm_best`, `confirming(done, total)` after each). Writes trials.nc and
     the best designs (`write_outputs`; the figures and report.md are
     `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best",
     "warnings"} (`design_warnings`)."""
@@ -806,7 +924,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
             client.close()
         raise
     dists = {v.field: v.distribution() for v in spec.variables}
-    spec_json = spec.model_dump_json()
+    spec_json = spec.screened().model_dump_json()  # the trials' accuracy
     base = str(base_dir.resolve())
     start = time.monotonic()
     cluster = None
@@ -846,6 +964,8 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
                 break
             if done + len(in_flight) < target:
                 pending.add(launch())
+        if not stopped and done >= target:
+            confirm_best(spec, study, client, base, out, confirming)
     finally:
         for fut in in_flight:
             fut.cancel()
@@ -881,6 +1001,12 @@ def trials_dataset(spec: DesignSpec, study):
     for k, o in enumerate(spec.objectives):
         data[f"objective_{o.name}"] = ("trial", np.array([t.values[k] if t.state == TrialState.COMPLETE else np.nan
                                                          for t in ts], float))
+    if spec.screening is not None:  # the confirmed trials' values at the design's own accuracy (NaN: not confirmed)
+        held = study.user_attrs.get("confirmed", {})
+        for k, o in enumerate(spec.objectives):
+            values = [(held.get(str(t.number)) or {}).get("values") for t in ts]
+            data[f"confirmed_{o.name}"] = ("trial", np.array([v[k] if v else np.nan for v in values], float),
+                                           {"long_name": f"{o.name} at the design's own accuracy (screened trials confirmed)"})
     for k, c in enumerate(spec.constraints):
         data[f"constraint_{c.metric}"] = ("trial", np.array([t.user_attrs.get("constraints", [np.nan] * len(spec.constraints))[k]
                                                             for t in ts], float))
@@ -950,11 +1076,14 @@ def _status(t) -> str:
 
 def best_trials(spec: DesignSpec, study) -> list:
     """The best feasible trial (one objective) or the feasible Pareto front (several), best
-    first / in order of the first objective."""
+    first / in order of the first objective; for a screened study, among its confirmed trials,
+    by their values at the design's own accuracy (`confirmed_trials`)."""
     from optuna.trial import TrialState
 
     ok = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
           if all(c <= 0 for c in t.user_attrs.get("constraints", []))]
+    if spec.screening is not None and study.user_attrs.get("confirmed"):  # the best at the design's own accuracy
+        ok = [t for t in confirmed_trials(spec, study) if all(c <= 0 for c in t.constraints)]
     if not ok:
         return []
     signs = np.array([1.0 if d == "minimize" else -1.0 for d in spec.directions])

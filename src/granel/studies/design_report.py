@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, design_warnings, evaluate_trial,
-                     trial_case)
+from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, confirmed_trials, design_scenario, design_warnings,
+                     evaluate_trial, trial_case)
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
@@ -338,10 +338,67 @@ def study_speed(study) -> dict:
     reused = np.array([bool(t.user_attrs.get("reused", False)) for t in ts], bool) | (case > turn)
     solver = np.where(reused, 0.0, solver)
     ok = np.isfinite(solver) & np.isfinite(turn) & (turn > 0)
+    ran = [t for t, r in zip(ts, reused) if not r and t.user_attrs.get("parts")]
+    parts = {k: float(np.median([t.user_attrs["parts"].get(k, np.nan) for t in ran]))
+             for k in ("load_s", "build_s", "modes_s", "solver_s", "metrics_s")} if ran else {}
+    if ran:  # launch to result beyond the worker's own time: queueing, transfers, the scheduler
+        parts["scheduling_s"] = float(np.median([t.user_attrs["turnaround_s"] - t.user_attrs["wall_s"] for t in ran]))
     return {"trials_per_min": 60.0 * n / wall if wall > 0 else math.nan, "trials": n, "wall_s": wall,
             "workers": max((s["workers"] for s in sessions), default=0),
             "outside_solver": float(1.0 - solver[ok].sum() / turn[ok].sum()) if ok.any() else math.nan,
-            "median_trial_s": float(np.median(turn[ok])) if ok.any() else math.nan, "reused": int(reused.sum())}
+            "median_trial_s": float(np.median(turn[ok])) if ok.any() else math.nan, "reused": int(reused.sum()),
+            "parts": parts}
+
+
+def screening_summary(spec: DesignSpec, study) -> dict | None:
+    """How a screened study's ranking holds at the design's own accuracy, over its confirmed
+    trials (`design.confirmed_trials`): per trial its screened and confirmed objective values and
+    ranks (by the first objective, best first), Kendall's tau between the two orders, the
+    screened rank of the confirmed best, and the largest change of an objective (absolute, and
+    relative to the confirmed value). None for a study without screening."""
+    if spec.screening is None:
+        return None
+    conf = confirmed_trials(spec, study)
+    sign = 1.0 if spec.directions[0] == "minimize" else -1.0
+    if not conf:
+        return {"rows": [], "tau": math.nan, "best_screened_rank": None, "max_change": math.nan,
+                "max_change_rel": math.nan}
+    screened = np.array([t._trial.values for t in conf], float)
+    full = np.array([t.values for t in conf], float)
+    rank = lambda x: np.argsort(np.argsort(sign * x, kind="stable"), kind="stable") + 1  # noqa: E731
+    rs, rf = rank(screened[:, 0]), rank(full[:, 0])
+    tau = math.nan
+    if len(conf) > 1:
+        from scipy.stats import kendalltau
+
+        tau = float(kendalltau(screened[:, 0], full[:, 0]).statistic)
+    change = np.abs(full - screened)
+    return {"rows": [{"trial": t.number, "screened": list(s), "confirmed": list(f), "screened_rank": int(a),
+                      "confirmed_rank": int(b)} for t, s, f, a, b in zip(conf, screened, full, rs, rf)],
+            "tau": tau, "best_screened_rank": int(rs[int(np.argmin(rf))]), "max_change": float(change.max()),
+            "max_change_rel": float((change / np.maximum(np.abs(full), 1e-300)).max())}
+
+
+def screening_lines(spec: DesignSpec, study) -> list[str]:
+    """report.md's section on a screened study (`screening_summary`)."""
+    s = screening_summary(spec, study)
+    if s is None:
+        return []
+    lines = ["## Screening", "",
+             f"Every trial ran at a looser accuracy ({', '.join(f'`{o}`' for o in spec.screening.overrides)}); the "
+             f"{spec.screening.confirm} best were run again at the design's own accuracy, and the best design is the best "
+             "of those.", ""]
+    if not s["rows"]:
+        return lines + ["No trial was confirmed (the study stopped before its confirmations).", ""]
+    o = spec.objectives[0]
+    lines += [f"| trial | {o.name}, screened | rank | {o.name}, confirmed | rank |", "| --- | --- | --- | --- | --- |"]
+    for r in s["rows"]:
+        lines.append(f"| {r['trial']} | {r['screened'][0]:.6g} | {r['screened_rank']} | {r['confirmed'][0]:.6g} | "
+                     f"{r['confirmed_rank']} |")
+    lines += ["", f"The confirmed best was number {s['best_screened_rank']} of the screening; Kendall's tau between the "
+              f"two orders {s['tau']:.3f}; the largest change of an objective between the accuracies "
+              f"{s['max_change']:.3g} ({100 * s['max_change_rel']:.3g} % of its confirmed value).", ""]
+    return lines
 
 
 def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path], out: Path,
@@ -383,7 +440,11 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
               f"launch-to-result time {sp['median_trial_s']:.2f} s, of which {100 * sp['outside_solver']:.0f} % outside "
               "the solver (scenario building, compiled kernels' loading, metrics, scheduling)"
               + (f"; {sp['reused']} finished trial(s) asked values already run and reused their case (no solver time)"
-                 if sp["reused"] else "") + ".", ""]
+                 if sp["reused"] else "") + "."
+              + (" A trial's parts, medians: " + ", ".join(f"{k[:-2].replace('_', ' ')} {v:.2f} s" for k, v in sp["parts"].items())
+                 + " (load: the scenarios validated and the case's fingerprint; modes: the solid's modes and the "
+                   "solver's set-up)." if sp["parts"] else ""), ""]
+    lines += screening_lines(spec, study)
     reasons: dict[str, int] = {}
     for t in failed:
         key = str(t.user_attrs.get("reason", "?")).split("\n")[0][:160]
@@ -443,14 +504,16 @@ def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path) -> li
 
 
 def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None = None, workers: int = 2,
-                 scheduler: str | None = None, max_wall: float | None = None, progress=None, reporting=None) -> dict:
+                 scheduler: str | None = None, max_wall: float | None = None, progress=None, reporting=None,
+                 confirming=None) -> dict:
     """`granel design`: run (or continue) the study (`design.run_design`, the design already
     checked by `check_design`), then write its report (`write_study_report`). Returns
-    run_design's dict, the report's files added to its "files". `progress` as run_design's;
-    `reporting()` is called once the trials are done, before the report."""
+    run_design's dict, the report's files added to its "files". `progress` and `confirming` as
+    run_design's; `reporting()` is called once the trials are done, before the report."""
     from .design import run_design  # looked up when called: a test may stand in for the engine
 
-    res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False)
+    res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False,
+                     confirming=confirming)
     if reporting is not None:
         reporting()
     res["files"] += write_study_report(spec, base_dir, res["study"], out)

@@ -317,7 +317,9 @@ def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict, check_usage: bool
 def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs: bool = True) -> dict:
     """Run one case (a worker task): writes its NetCDF file(s) (unless `keep_runs` is false: a
     design's trials keep their metrics only), returns its metrics or its error, with `wall_s`
-    (the case's time in the worker) and `solver_s` (its runs' time in the solver).
+    (the case's time in the worker) and `solver_s` (its runs' time in the solver), and the
+    parts of its time (`parts`: loading the scenarios, building, the solid's modes and the
+    solver's set-up, the solver, the metrics).
     A stored result is returned instead only if it finished ok with this case's fingerprint
     (`case_fingerprint`); a failed case is run again. `spec_json` is a sweep's or a design's
     JSON (its `CaseSpec` part is used). The runs and the metrics are the mode's
@@ -340,6 +342,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
         cached = _cached_case(done, fp, case)
         if cached is not None:
             return cached
+        res["parts"] = {"load_s": time.perf_counter() - start}  # the scenarios, validated, and the fingerprint
         runs = {}
         for key, sc in scenarios:
             path = out / f"{case['tag']}__{key}.nc"
@@ -349,10 +352,14 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
                 if keep_runs:
                     write_netcdf(ds, path)
             runs[key] = ds
+        measuring = time.perf_counter()
         res["metrics"], notes = mode.measure(spec, scenarios, runs)
         if notes:
             res["notes"] = notes
         res["solver_s"] = sum(float(ds.attrs.get("solver_wall_time_s", np.nan)) for ds in runs.values())
+        res["parts"].update(build_s=sum(float(ds.attrs.get("build_s", np.nan)) for ds in runs.values()),
+                            modes_s=sum(float(ds.attrs.get("solver_setup_s", np.nan)) for ds in runs.values()),
+                            solver_s=res["solver_s"], metrics_s=time.perf_counter() - measuring)
         res["status"] = "ok"
     except Exception as e:  # noqa: BLE001 - a failing case is recorded, the others go on
         res["status"] = f"error: {type(e).__name__}: {e}"
