@@ -114,3 +114,37 @@ def test_modal_analysis_uses_the_split():
     assert np.all(np.abs(modes.omega**2 - w2) <= bound)
     few = modal_analysis(m, m.ndof // 2)
     assert np.array_equal(few.omega, modes.omega[: m.ndof // 2])  # the same split solve, cut
+
+
+@pytest.mark.parametrize("layers", [SYMMETRIC, SYMMETRIC[:-1]], ids=["halves", "whole"])
+def test_modes_up_to_a_cut_off_are_the_dense_solve_s(layers):
+    """modal.modes_up_to (shift-invert Lanczos, on the halves when the plate is symmetric, the
+    count raised past the cut-off) against one dense solve of the whole: the same modes below a
+    cut-off set midway between two eigenvalues, more than the first Lanczos count (48) so that
+    the count is raised, each eigenvalue within the two solves' residual bounds
+    (`eigen_bounds`), each well-separated shape the dense one up to sign (Davis-Kahan, as in
+    test_split_modes_equal_the_whole_solve)."""
+    from granel.solid.modal import modes_up_to
+
+    m = plate(layers)
+    K, M = m.K.toarray(), m.M.toarray()
+    w2, phi = sl.eigh(K, M)
+    n = 130  # beyond 48 in each half of the symmetric plate too
+    w_cut = np.sqrt(0.5 * (w2[n - 1] + w2[n]))
+    modes = modes_up_to(m, w_cut, m.ndof - 1)
+    assert modes.count == n
+    shapes, w2k = np.asarray(modes.shapes), modes.omega**2
+    bound = eigen_bounds(K, M, shapes, w2k) + eigen_bounds(K, M, phi[:, :n], w2[:n])
+    assert np.all(np.abs(w2k - w2[:n]) <= bound)
+    gap = np.minimum(np.r_[np.inf, np.diff(w2)], np.r_[np.diff(w2), np.inf])[:n]
+    single = gap > 2 * bound
+    assert single.sum() > 0.9 * n
+    overlap = np.abs(np.einsum("ij,ij->j", shapes, M @ phi[:, :n]))
+    orth = np.abs(shapes.T @ M @ shapes - np.eye(n)).max()
+    orth0 = np.abs(phi.T @ M @ phi - np.eye(m.ndof)).max()
+    tol = 0.5 * (bound / (gap - bound)) ** 2 + orth + orth0
+    assert np.all(np.abs(overlap - 1)[single] <= tol[single])
+    few = modes_up_to(m, w_cut, 40)  # at most `top`: the lowest
+    assert few.count == 40
+    bound = eigen_bounds(K, M, np.asarray(few.shapes), few.omega**2) + eigen_bounds(K, M, phi[:, :40], w2[:40])
+    assert np.all(np.abs(few.omega**2 - w2[:40]) <= bound)

@@ -15,7 +15,7 @@ import scipy.sparse as sp
 
 from ..guard.fingerprints import file_crc32, sparse_digest
 from .base import SolidModel
-from .modal import Modes, modal_analysis
+from .modal import Modes, modal_analysis, modes_up_to
 
 
 # ---------------------------------------------------------------- all modes, cached on disk
@@ -109,22 +109,13 @@ def all_modes(model: SolidModel) -> Modes:
 
 def modes_below(model: SolidModel, f_cut: float, max_count: int | None = None) -> Modes:
     """The eigenmodes up to f_cut [Hz] (at most `max_count` of them) of a solid too large for all
-    of them (beyond DENSE_LIMIT DOFs), by shift-invert Lanczos at 0 with the count raised until the
-    highest passes f_cut; cached on disk by M, K, f_cut and max_count like `all_modes`, and
+    of them (beyond DENSE_LIMIT DOFs) or a run that keeps only those (`modal.modes_up_to`); cached on disk by M, K, f_cut and max_count like `all_modes`, and
     scaled like it from a cached set of a proportional solid that reaches far enough."""
     w_cut = 2 * np.pi * f_cut
     top = model.ndof - 1 if max_count is None else min(model.ndof - 1, max_count)
 
     def compute():
-        count = 64
-        while True:
-            modes = modal_analysis(model, min(count, top))
-            if modes.omega[-1] > w_cut or modes.count >= top:
-                break
-            # the mode count grows as f^2 in a plate: aim past the cut-off
-            count = int(min(top, max(2 * count, 1.2 * count * (w_cut / modes.omega[-1]) ** 2)))
-        keep = modes.omega <= w_cut
-        return Modes(modes.omega[keep], np.ascontiguousarray(modes.shapes[:, keep]))
+        return modes_up_to(model, w_cut, top)
 
     what = f"the modes below {f_cut / 1e6:.4g} MHz of a {model.kind} of {model.ndof} DOFs"
     return cached_modes(model, "modes-below", repr((float(f_cut), max_count)), compute, mmap=False, wanted=(w_cut, top),

@@ -48,12 +48,7 @@ def mirror_operator(model) -> sp.csr_matrix | None:
     if T is None:
         S = Sf
     else:
-        from scipy.sparse.linalg import spsolve
-
-        T = sp.csc_matrix(T)
-        S = sp.csr_matrix(spsolve(sp.csc_matrix(T.T @ T), sp.csc_matrix(T.T @ (Sf @ T))))
-        S.data[np.abs(S.data) < 1e-9] = 0.0
-        S.eliminate_zeros()
+        S = _left_solve(sp.csc_matrix(T.T @ T), sp.csc_matrix(T.T @ (Sf @ T)))
     if not _signed_permutation(S):
         return None
     S.data = np.sign(S.data)
@@ -62,6 +57,32 @@ def mirror_operator(model) -> sp.csr_matrix | None:
         scale = abs(A).max()
         if abs(S @ A @ S.T - A).max() > MATRIX_TOL * scale:
             return None
+    return S
+
+
+def _left_solve(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csr_matrix:
+    """A^-1 B, entries below 1e-9 dropped, for a block-diagonal A (T' T: a free node's DOFs
+    alone, a rigid layer's few together): each block inverted on its own."""
+    from scipy.sparse.csgraph import connected_components
+
+    count, labels = connected_components(A, directed=False)
+    order = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[order], np.arange(count + 1))
+    A = sp.csr_matrix(A)
+    size = np.diff(starts)
+    alone = order[starts[:-1][size == 1]]  # a DOF of its own: its diagonal's inverse
+    rows, cols, vals = [alone], [alone], [1.0 / A.diagonal()[alone]]
+    for k in np.flatnonzero(size > 1):
+        idx = order[starts[k]:starts[k + 1]]
+        inv = np.linalg.inv(A[idx][:, idx].toarray())
+        r, c = np.meshgrid(idx, idx, indexing="ij")
+        rows.append(r.ravel())
+        cols.append(c.ravel())
+        vals.append(np.ravel(inv))
+    Ainv = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=A.shape)
+    S = sp.csr_matrix(Ainv @ B)
+    S.data[np.abs(S.data) < 1e-9] = 0.0
+    S.eliminate_zeros()
     return S
 
 
