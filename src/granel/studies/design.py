@@ -19,10 +19,10 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .. import scenario as S
 from .modes import study_mode
@@ -248,6 +248,15 @@ def _metric(metrics: dict, name: str) -> float:
     return float(v)
 
 
+def _accuracy_override(item: str) -> str:
+    """A screening's override: simulation.FIELD=VALUE, nothing else."""
+    key = item.split("=", 1)[0].strip()
+    if "=" not in item or not key.startswith("simulation.") or key.count(".") != 1:
+        raise ValueError("a screening sets simulation fields only (simulation.FIELD=VALUE): it changes the accuracy, "
+                         "not the design")
+    return item
+
+
 class ScreeningSpec(BaseModel):
     """Multi-fidelity search: every trial runs at the looser accuracy of `overrides` (simulation
     fields only: a screening changes how accurately a design is run, not the design), and the
@@ -255,17 +264,9 @@ class ScreeningSpec(BaseModel):
     best of those."""
 
     model_config = ConfigDict(extra="forbid")
-    overrides: list[str] = Field(min_length=1, description="the trials' accuracy, e.g. 'simulation.rtol=1e-4'")
+    overrides: list[Annotated[str, AfterValidator(_accuracy_override)]] = Field(
+        min_length=1, description="the trials' accuracy, e.g. 'simulation.rtol=1e-4'")
     confirm: int = Field(10, ge=1, le=1000, description="the best trials run again at the design's own accuracy")
-
-    @model_validator(mode="after")
-    def _accuracy_only(self):
-        for k, item in enumerate(self.overrides):
-            key = item.split("=", 1)[0].strip()
-            if "=" not in item or not key.startswith("simulation.") or key.count(".") != 1:
-                raise ValueError(f"overrides.{k} = {item!r}: a screening sets simulation fields only "
-                                 "(simulation.FIELD=VALUE): it changes the accuracy, not the design")
-        return self
 
 
 class DesignSpec(CaseSpec):
