@@ -932,6 +932,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
     if client is None:
         cluster = local_cluster(workers)
         client = Client(cluster)
+    started = time.monotonic() - start  # the workers' start (a LocalCluster's processes and imports)
     slots = max(1, len(client.scheduler_info()["workers"]))
     in_flight: dict = {}
     stopped = False
@@ -974,7 +975,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         if cluster is not None:
             cluster.close()
     sessions = list(study.user_attrs.get("sessions", []))
-    sessions.append({"wall_s": time.monotonic() - start, "trials": done - first, "workers": slots})
+    sessions.append({"wall_s": time.monotonic() - start, "trials": done - first, "workers": slots, "start_s": started})
     study.set_user_attr("sessions", sessions)
     written = write_outputs(spec, base_dir, study, out)
     return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],

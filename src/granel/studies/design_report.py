@@ -347,7 +347,7 @@ def study_speed(study) -> dict:
             "workers": max((s["workers"] for s in sessions), default=0),
             "outside_solver": float(1.0 - solver[ok].sum() / turn[ok].sum()) if ok.any() else math.nan,
             "median_trial_s": float(np.median(turn[ok])) if ok.any() else math.nan, "reused": int(reused.sum()),
-            "parts": parts}
+            "parts": parts, "worker_start_s": sum(s.get("start_s", 0.0) for s in sessions)}
 
 
 def screening_summary(spec: DesignSpec, study) -> dict | None:
@@ -443,7 +443,8 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
                  if sp["reused"] else "") + "."
               + (" A trial's parts, medians: " + ", ".join(f"{k[:-2].replace('_', ' ')} {v:.2f} s" for k, v in sp["parts"].items())
                  + " (load: the scenarios validated and the case's fingerprint; modes: the solid's modes and the "
-                   "solver's set-up)." if sp["parts"] else ""), ""]
+                   "solver's set-up)." if sp["parts"] else "")
+              + (f" The workers took {sp['worker_start_s']:.1f} s to start." if sp["worker_start_s"] else ""), ""]
     lines += screening_lines(spec, study)
     reasons: dict[str, int] = {}
     for t in failed:
