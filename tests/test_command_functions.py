@@ -191,14 +191,14 @@ def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
     calls = []
 
     def run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=None, progress=None, check=True,
-                   confirming=None):
+                   confirming=None, finishing=None):  # a study stopped early: no `finishing`
         calls.append(("trials", trials, workers, scheduler, max_wall, check))
         progress(0, "ok", 1, 1)
         confirming(1, 1)
         return {"study": "study", "files": ["trials.nc"]}
 
-    def write_study_report(spec, base_dir, study, out):
-        calls.append(("report", study))
+    def write_study_report(spec, base_dir, study, out, rows=None):
+        calls.append(("report", study, rows))
         return ["report.md"]
 
     monkeypatch.setattr(D, "run_design", run_design)
@@ -207,7 +207,7 @@ def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
                           progress=lambda *a: calls.append(("progress", a)),
                           reporting=lambda: calls.append("reporting"), confirming=lambda *a: calls.append(("confirm", a)))
     assert calls == [("trials", 3, 1, None, 9.0, False), ("progress", (0, "ok", 1, 1)), ("confirm", (1, 1)), "reporting",
-                     ("report", "study")]
+                     ("report", "study", None)]
     assert res["files"] == ["trials.nc", "report.md"]
 
 

@@ -896,12 +896,13 @@ def confirmed_trials(spec: DesignSpec, study) -> list:
 
 def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = None, workers: int = 2,
                scheduler: str | None = None, timeout: float = 60.0, max_wall: float | None = None,
-               progress=None, check: bool = True, confirming=None) -> dict:
+               progress=None, check: bool = True, confirming=None, finishing=None) -> dict:
     """Run (or continue) the study until `trials` trials (default: the design's) have finished,
     on a LocalCluster of `workers` processes or the scheduler at `scheduler`; stop launching
     trials after `max_wall` seconds (the ones in flight are given up: a rerun repeats them).
     `check_design` runs first unless `check` is false (the caller ran it). A screened design's
-    best trials are then confirmed (`confirm_best`, `confirming(done, total)` after each). Writes trials.nc and
+    best trials are then confirmed (`confirm_best`, `confirming(done, total)` after each), and
+    `finishing(study, client)` runs on the same workers when the study is complete. Writes trials.nc and
     the best designs (`write_outputs`; the figures and report.md are
     `design_report.write_study_report`'s); returns {"study", "trials", "stopped", "files", "best",
     "warnings"} (`design_warnings`)."""
@@ -946,6 +947,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         return fut
 
     done = first = finished_trials(study)
+    wall = 0.0
     try:
         pending = as_completed([launch() for _ in range(min(slots, max(0, target - done)))])
         for fut in pending:
@@ -968,6 +970,9 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
                 pending.add(launch())
         if not stopped and done >= target:
             confirm_best(spec, study, client, base, out, confirming)
+        wall = time.monotonic() - start  # the study's session: its trials and their confirmations
+        if not stopped and done >= target and finishing is not None:
+            finishing(study, client)
     finally:
         for fut in in_flight:
             fut.cancel()
@@ -975,7 +980,7 @@ def run_design(spec: DesignSpec, base_dir: Path, out_dir, trials: int | None = N
         if cluster is not None:
             cluster.close()
     sessions = list(study.user_attrs.get("sessions", []))
-    sessions.append({"wall_s": time.monotonic() - start, "trials": done - first, "workers": slots, "start_s": started})
+    sessions.append({"wall_s": wall, "trials": done - first, "workers": slots, "start_s": started})
     study.set_user_attr("sessions", sessions)
     written = write_outputs(spec, base_dir, study, out)
     return {"study": study, "trials": written["trials"], "stopped": stopped, "files": written["files"],

@@ -32,24 +32,30 @@ def tighter(sc) -> list[str]:
     return out + [f"simulation.dt={s.dt / 4!r}"]
 
 
-def reevaluate(spec: DesignSpec, base_dir: Path, out: Path, best: list) -> list[dict]:
+def reevaluate(spec: DesignSpec, base_dir: Path, out: Path, best: list, client=None) -> list[dict]:
     """The base scenario and up to three best designs, each run at the study's accuracy and at
     the tighter one (`tighter`), runs kept in out/reevaluation: [{label, params, study, tight}],
-    `study` and `tight` being `run_case` results."""
-    folder = out / "reevaluation"
+    `study` and `tight` being `run_case` results. On `client`'s workers when given (the study's
+    cluster, all at once), else one after the other here."""
+    folder = str((out / "reevaluation").resolve())
     tight = tighter(design_scenario(spec, base_dir, {}))
     rows = [("base", {})] + [(f"trial {t.number}", dict(t.params)) for t in best[:3]]
-    results = []
+    jobs = []
     for label, params in rows:
         overrides = trial_case(spec, 0, params)["overrides"] if params else {}  # tied fields too
-        case = {"index": [0], "overrides": overrides, "tag": label.replace(" ", "-")}
-        r = {"label": label, "params": params}
         for key, extra in (("study", []), ("tight", tight)):
             sj = spec.model_copy(update={"overrides": [*spec.overrides, *extra]}).model_dump_json()
-            c = dict(case, tag=f"{case['tag']}-{key}")
-            r[key] = evaluate_trial(sj, str(base_dir.resolve()), c, str(folder.resolve()), True)
-        results.append(r)
-    return results
+            case = {"index": [0], "overrides": overrides, "tag": f"{label.replace(' ', '-')}-{key}"}
+            jobs.append((label, key, (sj, str(base_dir.resolve()), case, folder, True)))
+    if client is not None:
+        futures = [client.submit(evaluate_trial, *args, pure=False) for _, _, args in jobs]
+        done = client.gather(futures)
+    else:
+        done = [evaluate_trial(*args) for _, _, args in jobs]
+    results = {label: {"label": label, "params": params} for label, params in rows}
+    for (label, key, _), r in zip(jobs, done):
+        results[label][key] = r
+    return list(results.values())
 
 
 def objective_values(spec: DesignSpec, result: dict) -> list[float]:
@@ -490,13 +496,14 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
     return write_text(out / "report.md", "\n".join([text_mark("<!--"), *lines]))
 
 
-def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path) -> list[Path]:
-    """Figures, re-evaluation and report.md of a study (nothing when no trial finished)."""
+def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path, rows: list | None = None) -> list[Path]:
+    """Figures, re-evaluation (`rows`, if `reevaluate` ran already) and report.md of a study
+    (nothing when no trial finished)."""
     best = best_trials(spec, study)
     if not best:
         return []
     figures = optuna_figures(spec, study, out)
-    rows = reevaluate(spec, base_dir, out, best)
+    rows = reevaluate(spec, base_dir, out, best) if rows is None else rows
     modal = modal_rows(out, rows)
     for fig in (best_figure(spec, base_dir, rows, out), modes_figure(modal, out)):
         if fig is not None:
@@ -513,9 +520,18 @@ def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None
     run_design's; `reporting()` is called once the trials are done, before the report."""
     from .design import run_design  # looked up when called: a test may stand in for the engine
 
+    held = {}
+
+    def finishing(study, client):  # the re-evaluation on the study's own workers
+        if reporting is not None:
+            reporting()
+        best = best_trials(spec, study)
+        if best:
+            held["rows"] = reevaluate(spec, base_dir, out, best, client)
+
     res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False,
-                     confirming=confirming)
-    if reporting is not None:
+                     confirming=confirming, finishing=finishing)
+    if reporting is not None and "rows" not in held:
         reporting()
-    res["files"] += write_study_report(spec, base_dir, res["study"], out)
+    res["files"] += write_study_report(spec, base_dir, res["study"], out, held.get("rows"))
     return res
