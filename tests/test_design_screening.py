@@ -40,7 +40,8 @@ def test_the_best_are_confirmed_at_the_design_s_accuracy(tmp_path):
     misfit, each confirmed value is what an unscreened trial of the same values gives (the same
     run, so equal to the last bit), the reported best is the best confirmation, and the report
     and trials.nc show both fidelities."""
-    from granel.studies.design import (DesignSpec, evaluate_trial, load_design, run_design, screened_ranking,
+    from granel.studies.screening import screened_ranking
+    from granel.studies.design import (DesignSpec, evaluate_trial, load_design, run_design,
                                        trial_case)
     from granel.studies.design_report import design_study
 

@@ -358,7 +358,7 @@ def study_speed(study) -> dict:
 
 def screening_summary(spec: DesignSpec, study) -> dict | None:
     """How a screened study's ranking holds at the design's own accuracy, over its confirmed
-    trials (`design.confirmed_trials`): per trial its screened and confirmed objective values and
+    trials (`screening.confirmed_trials`): per trial its screened and confirmed objective values and
     ranks (by the first objective, best first), Kendall's tau between the two orders, the
     screened rank of the confirmed best, and the largest change of an objective (absolute, and
     relative to the confirmed value). None for a study without screening."""
