@@ -152,7 +152,7 @@ def quadratic_step(s: Samples) -> Step | None:
             H[i, j] = H[j, i] = coef[k] * (2.0 if i == j else 1.0)
             k += 1
     w, V = np.linalg.eigh(H)
-    if w.min() > RCOND * max(1.0, abs(w).max()):
+    if w.min() > RCOND * abs(w).max():  # convex, on the fit's own scale
         return _capped(x[0], -V @ ((V.T @ g) / w), x)
     size = float(np.linalg.norm(g))
     if not size > 0:
