@@ -254,6 +254,17 @@ def test_closed_form_searches_land_within_one_percent(name, workers):
         assert abs(problem.error(study.best)) < LANDS, (seed, study.best)
 
 
+def test_a_target_beyond_the_range_ends_at_its_bound_and_the_study_goes_on():
+    """A 5 kHz cut-off needs beads larger than the range's 10 mm: the refinement steps to the
+    bound once, then gives way to TPE (a step onto values tried); the study asks 60 distinct
+    values, and its best is the bound's."""
+    problem = Problem("beyond", PROBLEMS["radius"].variables, 5000.0)
+    study = closed_form_study(problem, 1, 1)
+    radii = [p[RADIUS] for p in study.params]
+    assert len(set(radii)) == 60 and radii.count(0.010) == 1
+    assert study.best[RADIUS] == 0.010
+
+
 def mobility(F0: float, f=1e4, R=0.005, zeta=0.05) -> float:
     """|v / F| of a steel granule of radius R on a rigid wall, pressed by F0 and shaken at f:
     a mass m on the linearised Hertz spring k = 3/2 A^(2/3) F0^(1/3) (A = 4/3 E/(1 - nu^2)
