@@ -274,7 +274,8 @@ class DesignSpec(CaseSpec):
     seed: int = Field(0, ge=0)
     sampler: Literal["auto", "tpe", "cmaes", "nsga2", "random"] = Field(
         "auto", description="auto: TPE and then a local refinement (studies.refine) for one objective, no "
-                            "constraints and continuous variables; TPE for one objective otherwise; NSGA-II for several")
+                            "constraints and continuous variables; TPE for one objective otherwise; NSGA-II "
+                            "for several")
     population: int | None = Field(None, ge=2, le=10_000, description="NSGA-II's generation size (default: "
                                                                      "trials / 6, between 8 and 50)")
     variables: list[VariableSpec] = Field(min_length=1)
