@@ -253,7 +253,10 @@ class DesignSpec(CaseSpec):
     name: str = "design"
     trials: int = Field(50, ge=1, le=100_000)
     seed: int = Field(0, ge=0)
-    sampler: Literal["auto", "tpe", "cmaes", "nsga2", "random"] = "auto"
+    sampler: Literal["auto", "tpe", "cmaes", "nsga2", "random"] = Field(
+        "auto", description="auto: TPE and then a local refinement (studies.refine) for one objective, no "
+                            "constraints and continuous variables; TPE for one objective otherwise; NSGA-II "
+                            "for several")
     population: int | None = Field(None, ge=2, le=10_000, description="NSGA-II's generation size (default: "
                                                                      "trials / 6, between 8 and 50)")
     variables: list[VariableSpec] = Field(min_length=1)
@@ -583,8 +586,10 @@ def trial_case(spec: DesignSpec, number: int, params: dict) -> dict:
 
 
 def make_sampler(spec: DesignSpec, seed: int):
-    """Optuna's sampler for this design, seeded with `seed` (TPE for one objective and NSGA-II
-    for several under "auto"; constraints through Optuna's constraints_func)."""
+    """Optuna's sampler for this design, seeded with `seed` (under "auto": TPE then a local
+    refinement for one objective, no constraints and continuous variables (`refines`), TPE for
+    one objective otherwise, NSGA-II for several; constraints through Optuna's
+    constraints_func)."""
     import optuna
 
     # constraints: stored on each trial (Trial.set_constraint, Optuna 5) or read by constraints_func (Optuna 4)
@@ -593,13 +598,36 @@ def make_sampler(spec: DesignSpec, seed: int):
     if kind == "auto":
         kind = "tpe" if len(spec.objectives) == 1 else "nsga2"
     if kind == "tpe":
-        return optuna.samplers.TPESampler(seed=seed, multivariate=True, constraints_func=cons,
-                                          n_startup_trials=min(10, max(3, spec.trials // 5)))
+        tpe = optuna.samplers.TPESampler(seed=seed, multivariate=True, constraints_func=cons,
+                                         n_startup_trials=tpe_startup(spec))
+        return refining_sampler(spec, tpe) if refines(spec) else tpe
     if kind == "cmaes":
         return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
     if kind == "nsga2":
         return optuna.samplers.NSGAIISampler(seed=seed, constraints_func=cons, population_size=nsga2_population(spec))
     return optuna.samplers.RandomSampler(seed=seed)
+
+
+def tpe_startup(spec: DesignSpec) -> int:
+    """TPE's random trials before it models the study."""
+    return min(10, max(3, spec.trials // 5))
+
+
+def refines(spec: DesignSpec) -> bool:
+    """Whether the design's sampler refines locally after its global phase (`studies.refine`):
+    `auto`, one objective, no constraints, every variable continuous."""
+    return (spec.sampler == "auto" and len(spec.objectives) == 1 and not spec.constraints
+            and all(v.kind == "float" for v in spec.variables))
+
+
+def refining_sampler(spec: DesignSpec, global_sampler):
+    """TPE for the study's first third (`refine.global_trials`), then the local refinement."""
+    from . import refine
+
+    o = spec.objectives[0]
+    goal = refine.Goal(o.metric, o.target, 1.0 if o.sense == "minimize" else -1.0)
+    scales = [refine.Scale(v.field, float(v.low), float(v.high), v.log) for v in spec.variables]
+    return refine.RefiningSampler(global_sampler, scales, goal, refine.global_trials(spec.trials, tpe_startup(spec)))
 
 
 def nsga2_population(spec: DesignSpec) -> int:
