@@ -167,6 +167,26 @@ class IterWork(NamedTuple):
     iface: InterfaceForces
 
 
+# ---------------------------------------------------------------- copies
+
+
+@njit(cache=True)
+def copy1(dst, src):
+    """dst[:] = src for 1-d arrays of one length, as a loop: numba's slice assignment compiles
+    a broadcast and a formatted shape error at every use, a large part of the kernels' compile
+    time (docs/performance.md)."""
+    for k in range(dst.shape[0]):
+        dst[k] = src[k]
+
+
+@njit(cache=True)
+def copy2(dst, src):
+    """dst[:, :] = src for 2-d arrays of one shape, as loops (`copy1`)."""
+    for k in range(dst.shape[0]):
+        for m in range(dst.shape[1]):
+            dst[k, m] = src[k, m]
+
+
 # ---------------------------------------------------------------- small dense systems
 
 

@@ -206,15 +206,18 @@ def _locked_compile(compile_):
     """numba's `Dispatcher.compile` counting the nesting of compiles: the compile lock a miss took
     (`checked`) is released when the outermost compile ends, whatever ends it."""
 
+    from numba.core.compiler_lock import global_compiler_lock
+
     def compile(sig):
-        _COMPILING["depth"] += 1
-        try:
-            return compile_(sig)
-        finally:
-            _COMPILING["depth"] -= 1
-            if _COMPILING["depth"] == 0 and _COMPILING["fd"] is not None:
-                fd, _COMPILING["fd"] = _COMPILING["fd"], None
-                os.close(fd)  # releases the lock
+        with global_compiler_lock:  # numba's own (re-entrant): one thread of a process compiles at a time
+            _COMPILING["depth"] += 1
+            try:
+                return compile_(sig)
+            finally:
+                _COMPILING["depth"] -= 1
+                if _COMPILING["depth"] == 0 and _COMPILING["fd"] is not None:
+                    fd, _COMPILING["fd"] = _COMPILING["fd"], None
+                    os.close(fd)  # releases the lock
 
     return compile
 
