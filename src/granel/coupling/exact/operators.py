@@ -30,8 +30,8 @@ def ensure_ops(cache, solid, slot, h):
         tau = nodes[j + 1] * h
         weights_at(omega, tau, T, cache.free[slot, j], disp, vel)
         for b in range(nb):
-            cache.Cu[slot, j, b, :, :] = np.dot(P * disp[:, b].copy(), P.T)
-            cache.Cw[slot, j, b, :, :] = np.dot(P * vel[:, b].copy(), P.T)
+            core.copy2(cache.Cu[slot, j, b], np.dot(P * disp[:, b].copy(), P.T))
+            core.copy2(cache.Cw[slot, j, b], np.dot(P * vel[:, b].copy(), P.T))
             i1 = 0.0
             i2 = 0.0
             fact = 1.0
