@@ -45,7 +45,7 @@ def trial_step(state, cache, slot, work):
     nc = state.F.shape[0]
     X = work.unknowns.X
     Fs = np.empty((nb, nc, 2))
-    Fs[0] = state.F
+    core.copy2(Fs[0], state.F)
     for b in range(1, nb):
         for r in range(2 * nc):
             Fs[b, r // 2, r % 2] = X[(b - 1) * 2 * nc + r]
