@@ -132,16 +132,30 @@ def test_the_result_file_written_without_xarray_is_xarrays():
         assert all(da[v].dtype == db[v].dtype for v in da.variables)
 
 
+def test_the_command_line_imports_no_heavy_library_before_a_command_needs_it():
+    """`import granel.cli` (what every command pays before it starts) imports none of xarray,
+    pandas, h5netcdf, h5py, dask, distributed, optuna, matplotlib, scikit-fem or scipy.spatial."""
+    import subprocess
+    import sys
+
+    heavy = ("xarray", "pandas", "h5netcdf", "h5py", "dask", "distributed", "optuna", "matplotlib", "skfem",
+             "scipy.spatial")
+    code = f"import sys, granel.cli\nprint(sorted(m for m in {heavy!r} if sys.modules.get(m) is not None))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 def test_a_fresh_run_imports_only_what_it_needs(tmp_path):
     """A fresh `granel run` of a plate case (its assembly cached by an earlier run) imports
-    neither xarray and pandas (the result is written with h5netcdf), nor scikit-fem, matplotlib or
-    dask."""
+    neither xarray and pandas (the result is written with h5netcdf), nor scikit-fem, matplotlib,
+    dask, optuna or scipy.spatial (a scenario's lattice pairs are found directly)."""
     import subprocess
     import sys
 
     code = ("import runpy, sys; sys.argv = ['granel', 'run', 'paper', '--duration', '2us', '-o', sys.argv[1]]\n"
             "try:\n    runpy.run_module('granel', run_name='__main__')\nexcept SystemExit as e:\n    assert not e.code, e.code\n"
-            "print(sorted(m for m in ('xarray', 'pandas', 'skfem', 'matplotlib', 'dask', 'distributed') "
+            "print(sorted(m for m in ('xarray', 'pandas', 'skfem', 'matplotlib', 'dask', 'distributed', 'optuna', "
+            "'scipy.spatial') "
             "if sys.modules.get(m) is not None))")
     for k in range(2):  # the first may assemble the plate (and cache it)
         out = subprocess.run([sys.executable, "-c", code, str(tmp_path / f"r{k}.nc")], capture_output=True, text=True,

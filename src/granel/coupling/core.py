@@ -167,6 +167,26 @@ class IterWork(NamedTuple):
     iface: InterfaceForces
 
 
+# ---------------------------------------------------------------- copies
+
+
+@njit(cache=True)
+def copy1(dst, src):
+    """dst[:] = src for 1-d arrays of one length, as a loop: numba's slice assignment compiles
+    a broadcast and a formatted shape error at every use, a large part of the kernels' compile
+    time (docs/performance.md)."""
+    for k in range(dst.shape[0]):
+        dst[k] = src[k]
+
+
+@njit(cache=True)
+def copy2(dst, src):
+    """dst[:, :] = src for 2-d arrays of one shape, as loops (`copy1`)."""
+    for k in range(dst.shape[0]):
+        for m in range(dst.shape[1]):
+            dst[k, m] = src[k, m]
+
+
 # ---------------------------------------------------------------- small dense systems
 
 
@@ -313,7 +333,7 @@ def interface_map(y, t, h, model, pred, C, F, rate, w, derivatives):
         mo.a[c, d] = ab
         w.u1[c, d] = pred.u[r] + pred.v[r] * h + 0.5 * ab * h * h
         w.v1[c, d] = pred.v[r] + ab * h
-    w.ytr[:] = y
+    copy1(w.ytr, y)
     if rk4_substepped(w.ytr, t, h, model, mo, rate, w.rk4) < 0:
         return False
     interface_forces(w.ytr, model, w.u1, w.v1, w.iface, derivatives)
@@ -327,18 +347,18 @@ def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
     F <- G(F) or by Newton. On success w.ytr holds the granular state at t + h and w.iface the
     contact state there. Returns (status, iterations); on failure F is left at its guess."""
     nc = F.shape[0]
-    w.F_start[:, :] = F
+    copy2(w.F_start, F)
     for c in range(nc):
         for d in range(2):
             w.motion.u0[c, d] = pred.u[2 * c + d]
     rate = 1.5 * friction_rate(y, model, w.motion)  # stiff friction: RK4 sub-steps (forces may grow in the step)
     for it in range(1, cfg.max_iterations + 1):
         if not interface_map(y, t, h, model, pred, C, F, rate, w, cfg.newton):
-            F[:, :] = w.F_start
+            copy2(F, w.F_start)
             return NON_FINITE, it
         G = w.iface.F
         if frame.fixed:  # the points do not move: G does not depend on F
-            F[:, :] = G
+            copy2(F, G)
             return CONVERGED, it
         ok = True
         for c in range(nc):
@@ -346,12 +366,12 @@ def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
                 if abs(G[c, d] - F[c, d]) > cfg.abstol + cfg.reltol * abs(F[c, d]):
                     ok = False
         if ok or not cfg.newton:  # (A4) met, or the paper's fixed point F <- G(F)
-            F[:, :] = G
+            copy2(F, G)
             if ok:
                 return CONVERGED, it
             continue
         _newton_update(F, C, h, w.iface, w, frame.tangent, frame.has_tangent, model.law)
-    F[:, :] = w.F_start
+    copy2(F, w.F_start)
     return NO_CONVERGENCE, cfg.max_iterations
 
 
@@ -431,7 +451,7 @@ def modal_predictor(st, solid, D, h, dvec, a_pred):
     for i in range(eta.shape[0]):
         dvec[i] = -D[i] * w2[i] * (eta[i] + etad[i] * h + 0.25 * h * h * etaa[i])
     if eta.shape[0]:
-        a_pred[:] = np.dot(solid.P, dvec)
+        copy1(a_pred, np.dot(solid.P, dvec))
     else:
         a_pred[:] = 0.0
 
@@ -504,16 +524,16 @@ def advance_modal(st, model, ref_pos, solid, cache, cfg, target, log):
             f[r] = st.F[r // 2, r % 2]
         modal_accept(st, solid, D, h, f, dvec)
         contact_accept(st, cache.C[level], h, pred.a_pred, f)
-        st.y[:] = w.ytr
-        st.normal[:] = w.iface.normal
-        st.vrel[:] = w.iface.vrel
+        copy1(st.y, w.ytr)
+        copy1(st.normal, w.iface.normal)
+        copy1(st.vrel, w.iface.vrel)
         clock.t += h
         clock.ticks += 2 ** (H - level)
         clock.level = level
         log.t[k] = clock.t
         log.h[k] = h
         log.iterations[k] = its
-        log.lam[k, :] = lam
+        copy1(log.lam[k], lam)
         k += 1
         if moved_beyond(st.y, n, ref_pos, lim2):
             return REBUILD, k

@@ -95,7 +95,7 @@ def _initial_of_record(traj: Trajectory) -> tuple[float, float]:
     """The ledger (13) and the energy a run started with, from its first recorded output (for a
     checkpoint written before they were stored with it)."""
     first = {k: traj.first(k) for k in traj.names}
-    ledger = energy_ledger(float(first["energy_solid"]), float(np.sum(first["energy_media"])),
+    ledger = energy_ledger.py_func(float(first["energy_solid"]), float(np.sum(first["energy_media"])),
                            float(first["dissipated_viscous"]), float(first["dissipated_friction"]), float(first["input_work"]))
     return float(ledger), float(np.sum(first["energy_media"]) + first["energy_solid"])
 

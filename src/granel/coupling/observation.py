@@ -17,7 +17,8 @@ from ..guard.jit import njit
 @njit(cache=True, inline="always")
 def energy_ledger(e_solid, e_granular, dissipated_viscous, dissipated_friction, input_work):
     """E_solid + E_granular + D - W, eq. (13): constant in time for an exact solution (scalars or
-    arrays)."""
+    arrays; from Python, `energy_ledger.py_func` does the same arithmetic with numpy, without
+    compiling or loading a kernel for each array layout)."""
     return e_solid + e_granular + (dissipated_viscous + dissipated_friction) - input_work
 
 
@@ -159,10 +160,11 @@ def observe_outputs(times, Y, su, solid_energy, F, system, model, normals, tange
     ek, ep = solid_energy[:, 0], solid_energy[:, 1]
     dv, df, w = Y[:, 6 * n + ACC_VISC], Y[:, 6 * n + ACC_FRIC], Y[:, 6 * n + ACC_WORK]
     where = q.where
+    ledger = energy_ledger.py_func(ek + ep, q.granular, dv, df, w)  # numpy's arithmetic, no kernel per layout
     return Observation(times=times, pos=Y[:, : 2 * n].reshape(K, n, 2), theta=Y[:, 2 * n: 3 * n],
                        vel=Y[:, 3 * n: 5 * n].reshape(K, n, 2), omega=Y[:, 5 * n: 6 * n], energy_media=q.media,
                        energy_solid=ek + ep, energy_solid_kinetic=ek, energy_solid_potential=ep, dissipated_viscous=dv,
-                       dissipated_friction=df, input_work=w, ledger=energy_ledger(ek + ep, q.granular, dv, df, w),
+                       dissipated_friction=df, input_work=w, ledger=ledger,
                        force_normal=np.einsum("kij,ij->ki", F, normals), force_tangential=np.einsum("kij,ij->ki", F, tangents),
                        wall_force=q.walls, overlap_ratio=q.overlap,
                        overlap_at=_Labels(lambda i: contact_label(system, model, int(where[i, 0]), int(where[i, 1])), K))

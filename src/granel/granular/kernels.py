@@ -297,7 +297,8 @@ def rk4_substepped(y, t, h, model, motion, rate, work):
     m = max(1, int(math.ceil(rate * h / 2.0)))
     s = h / m
     for k in range(m):
-        if not rk4_step(y, t + k * s, s, model, motion, k * s, work):
+        # a typed flag, not a literal: one compiled signature of rk4_step
+        if not rk4_step(y, t + k * s, s, model, motion, k * s, work, np.bool_(False)):
             return -1
     return m
 

@@ -153,10 +153,12 @@ def _spaced(layout, name: str):
 
 
 def _touching(pos: np.ndarray, reach: float) -> np.ndarray:
-    """Index pairs (i < j) of centres closer than `reach` (the neighbours of a lattice)."""
-    from scipy.spatial import cKDTree
+    """Index pairs (i < j) of centres closer than `reach` (the neighbours of a lattice): compared
+    directly below `system.DIRECT_PAIRS` granules, so that building a scenario does not import
+    scipy.spatial."""
+    from .system import close_pairs
 
-    return cKDTree(pos).query_pairs(reach, output_type="ndarray").reshape(-1, 2)
+    return close_pairs(pos, reach).reshape(-1, 2)
 
 
 def hexagonal_columns(

@@ -9,7 +9,12 @@ Older folders are removed, the newest KEEP kept.
 
 A damaged cache file ends a process inside numba, so each folder keeps a manifest (`MANIFEST`:
 every file's size and CRC-32), recorded after numba saves a kernel (`_record_kernel`); a kernel
-whose files do not match it is removed and compiled again (`_check_kernel`)."""
+whose files do not match it is removed and compiled again (`_check_kernel`).
+
+Processes that start at once (a study's workers) compile each kernel once: a process that misses
+a kernel in the cache compiles it holding the folder's compile lock (`COMPILE_LOCK`), and the
+others wait for that lock and then load what it saved (`_compile_lock`), at most `COMPILE_WAIT_S`
+(then `CompileWaitTimeout`, naming the holder)."""
 
 from __future__ import annotations
 
@@ -23,6 +28,8 @@ from pathlib import Path
 
 import numba
 from numba.core import config
+
+from .exits import STOPPED, GranelError
 
 PACKAGE = Path(__file__).resolve().parent.parent  # granel/
 
@@ -131,7 +138,7 @@ def cached_njit(sources, home: Path = PACKAGE):
 
         def apply(fn):
             with _cache_dir(folder()):
-                return checked(deco(fn))
+                return checked(deco(fn), folder())
         return apply
 
     return njit
@@ -146,18 +153,28 @@ _LISTINGS: dict = {}  # folder -> ((device, inode, mtime_ns) of the folder, its 
 _NOTED: set = set()
 
 
-def checked(dispatcher):
+def checked(dispatcher, lock_folder: Path | None = None):
     """`dispatcher` (a numba.njit with cache=True) with its cache checked before each load
     (`_check_kernel`) and recorded after each save (`_record_kernel`). A kernel whose damaged
-    files cannot be removed is compiled without the cache."""
+    files cannot be removed is compiled without the cache. A kernel missing from the cache is
+    compiled under the compile lock of `lock_folder` (its own cache folder by default), after
+    one more look at the cache once the lock is held (`_compile_lock`)."""
     cache = getattr(dispatcher, "_cache", None)
     index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
     if index is None:  # no disk cache (numba found no folder to write): nothing to check
         return dispatcher
     folder, base = Path(cache._cache_path), Path(index).name.removesuffix(".nbi")
+    lock_folder = folder if lock_folder is None else Path(lock_folder)
     load, save = cache.load_overload, cache.save_overload
 
     def load_overload(sig, target_context):
+        if _COMPILING["fd"] is None and _check_kernel(folder, base, remove=False):
+            got = load(sig, target_context)
+            if got is not None:
+                return got
+        if _COMPILING["fd"] is None and _COMPILING["depth"]:
+            # a miss, or files another process is writing: look again once the lock is held
+            _COMPILING["fd"] = _compile_lock(lock_folder)
         if not _check_kernel(folder, base):
             cache.disable()
         return load(sig, target_context)
@@ -167,7 +184,106 @@ def checked(dispatcher):
         _record_kernel(folder, base)
 
     cache.load_overload, cache.save_overload = load_overload, save_overload
+    dispatcher.compile = _locked_compile(dispatcher.compile)
     return dispatcher
+
+
+# ---------------------------------------------------------------- one compile for all processes
+
+COMPILE_LOCK = ".granel-compile.lock"
+COMPILE_WAIT_S = 1200.0  # the longest wait for another process's compile (a cold compile: about a minute)
+COMPILE_NOTE_S = 2.0  # a wait longer than this is announced (once per process)
+_COMPILING = {"depth": 0, "fd": None}  # nesting of compiles in this process; the lock's descriptor
+
+
+class CompileWaitTimeout(GranelError, RuntimeError):
+    """Another process held the compile lock longer than COMPILE_WAIT_S (exit 3)."""
+
+    code = STOPPED
+
+
+def _locked_compile(compile_):
+    """numba's `Dispatcher.compile` counting the nesting of compiles: the compile lock a miss took
+    (`checked`) is released when the outermost compile ends, whatever ends it."""
+
+    from numba.core.compiler_lock import global_compiler_lock
+
+    def compile(sig):
+        with global_compiler_lock:  # numba's own (re-entrant): one thread of a process compiles at a time
+            _COMPILING["depth"] += 1
+            try:
+                return compile_(sig)
+            finally:
+                _COMPILING["depth"] -= 1
+                if _COMPILING["depth"] == 0 and _COMPILING["fd"] is not None:
+                    fd, _COMPILING["fd"] = _COMPILING["fd"], None
+                    os.close(fd)  # releases the lock
+
+    return compile
+
+
+def _compile_lock(folder: Path, wait_s: float | None = None):
+    """The exclusive compile lock of `folder` (a descriptor; closing it releases the lock, as the
+    end of the process does), its holder's token written in it; waits while another process
+    holds it, announcing a wait beyond COMPILE_NOTE_S, and raises CompileWaitTimeout after
+    `wait_s` (COMPILE_WAIT_S). None where the system has no flock or the folder is not writable
+    (the compile then goes ahead unlocked)."""
+    import time
+
+    try:
+        import fcntl
+    except ImportError:
+        return None
+    wait_s = COMPILE_WAIT_S if wait_s is None else wait_s
+    path = folder / COMPILE_LOCK
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+    except OSError:
+        return None
+    start = time.monotonic()
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            break
+        except BlockingIOError:
+            waited = time.monotonic() - start
+            if waited > wait_s:
+                holder = _holder(fd)
+                os.close(fd)
+                raise CompileWaitTimeout(
+                    f"compiled-kernel cache: waited {waited:.0f} s for {holder} to compile granel's kernels into "
+                    f"{folder} (it holds {path}); let it finish or stop it, or give this process another cache "
+                    "(NUMBA_CACHE_DIR)") from None
+            if waited > COMPILE_NOTE_S:
+                _note(("compile-wait", folder), f"compiled-kernel cache: waiting for {_holder(fd)}, which compiles "
+                      f"granel's kernels into {folder} (at most {wait_s:.0f} s)")
+            time.sleep(0.05 if waited < 1.0 else 0.25)
+        except OSError:
+            os.close(fd)
+            return None
+    _claim(fd)
+    return fd
+
+
+def _holder(fd: int) -> str:
+    """"process HOST-PID-START" as the lock's holder wrote itself in, or "another process"."""
+    try:
+        token = os.pread(fd, 200, 0).decode("ascii", "replace").strip()
+    except OSError:
+        token = ""
+    return f"process {token}" if token else "another process"
+
+
+def _claim(fd: int) -> None:
+    """Write this process's token in the lock it now holds (for the messages of its waiters)."""
+    from .owners import process_token
+
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, process_token().encode("ascii", "replace") + b"\n", 0)
+    except OSError:
+        pass
 
 
 def _kernel_files(folder: Path, base: str) -> list[Path]:
@@ -233,10 +349,10 @@ def _manifest(folder: Path) -> dict:
     return files
 
 
-def _check_kernel(folder: Path, base: str) -> bool:
+def _check_kernel(folder: Path, base: str, remove: bool = True) -> bool:
     """Check the cached files of kernel `base` against the manifest; if one is unknown to it or
     does not match it, remove them all (numba then compiles the kernel again) with a note.
-    False if they cannot be removed."""
+    False if they cannot be removed, or, with remove=False, if they do not match."""
     files = _kernel_files(folder, base)
     if not files:
         return True
@@ -258,6 +374,8 @@ def _check_kernel(folder: Path, base: str) -> bool:
             break
     if why is None:
         return True
+    if not remove:
+        return False
     removed = True
     for g in files:
         try:

@@ -8,6 +8,7 @@ import numpy as np
 from ...granular.bundles import interface_buffers
 from ...granular.kernels import interface_forces, motion_at, rk4_substepped
 from ...guard.jit import njit
+from .. import core
 from ...solid.propagation import weights_at
 from ..observation import modal_energy
 from .operators import propagate_mode
@@ -19,7 +20,7 @@ def dense(step, solid, model, tau, out):
     """The state at tau inside a step: the granules by RK4 from the step's start over tau under the
     step's contact motion, the modes by their exact response to the step's force polynomial, and
     the interface force as the contact law gives it there (what the granules feel)."""
-    out.y[:] = step.y0
+    core.copy1(out.y, step.y0)
     if tau > 0.0:
         rk4_substepped(out.y, step.t0, tau, model, step.motion, step.rate, np.empty((5, out.y.shape[0])))
     nc = out.F.shape[0]
@@ -28,8 +29,8 @@ def dense(step, solid, model, tau, out):
         for c in range(nc):
             u[c, 0], u[c, 1], w[c, 0], w[c, 1] = motion_at(step.motion, c, tau)
         iface = interface_buffers(nc)
-        interface_forces(out.y, model, u, w, iface, False)
-        out.F[:, :] = iface.F
+        interface_forces(out.y, model, u, w, iface, np.bool_(False))  # a typed flag, not a literal: one signature
+        core.copy2(out.F, iface.F)
     nb, nr = step.Ts.shape[0], step.eta0.shape[0]
     free, disp, vel = np.empty((nr, 3)), np.empty((nr, nb)), np.empty((nr, nb))
     weights_at(solid.omega, tau, step.Ts, free, disp, vel)
@@ -44,7 +45,7 @@ def trial_step(state, cache, slot, work):
     nc = state.F.shape[0]
     X = work.unknowns.X
     Fs = np.empty((nb, nc, 2))
-    Fs[0] = state.F
+    core.copy2(Fs[0], state.F)
     for b in range(1, nb):
         for r in range(2 * nc):
             Fs[b, r // 2, r % 2] = X[(b - 1) * 2 * nc + r]
@@ -59,10 +60,10 @@ def dense_state(state, solid, model, t_out, out):
     t0, t1 = clock.t_start, clock.t
     tau = t_out - t0
     if t1 - t0 <= 0.0 or tau >= t1 - t0:
-        out.y[:] = state.y
-        out.eta[:] = state.eta
-        out.etad[:] = state.etad
-        out.F[:, :] = state.F
+        core.copy1(out.y, state.y)
+        core.copy1(out.eta, state.eta)
+        core.copy1(out.etad, state.etad)
+        core.copy2(out.F, state.F)
         return
     dense(StepData(last.y0, last.eta0, last.etad0, t0, last.Fs, last.qs, last.Ts, last.motion, clock.friction_rate),
           solid, model, tau, out)
@@ -75,5 +76,5 @@ def solid_at_outputs(P, omega, oeta, oetad, su, energy):
     nc = P.shape[0] // 2
     for o in range(oeta.shape[0]):
         u = np.dot(P, oeta[o]) if P.shape[1] else np.zeros(2 * nc)
-        su[o, :, :] = u.reshape(nc, 2)
+        core.copy2(su[o], u.reshape(nc, 2))
         energy[o, 0], energy[o, 1] = modal_energy(oeta[o], oetad[o], omega)

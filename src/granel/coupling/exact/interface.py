@@ -77,12 +77,12 @@ def rk4_with_estimate(state, t, h, model, motion, rate, granular):
     granular.err. False if the state stops being finite."""
     m = max(1, int(math.ceil(rate * h / 2.0)))
     s = h / m
-    granular.y[:] = state.y
+    core.copy1(granular.y, state.y)
     granular.err[:] = 0.0
     n = granular.y.shape[0]
     for k in range(m):
         if k == 0:
-            granular.stages[0, :] = state.dy
+            core.copy1(granular.stages[0], state.dy)
         if not rk4_step(granular.y, t + k * s, s, model, motion, k * s, granular.stages, k == 0):
             return False
         rhs(t + (k + 1) * s, granular.y, granular.dy_end, model, motion, (k + 1) * s)
@@ -191,7 +191,7 @@ def interface_solve(state, t, h, model, solid, cache, slot, cfg, work):
         if not force_map(state, t, h, model, cache, slot, substep_rate, work, cfg.newton):
             return core.NON_FINITE, it
         if solid.frame.fixed:
-            X[:] = G
+            core.copy1(X, G)
             return core.CONVERGED, it
         ok = True
         worst = 0.0  # the largest residual against its tolerance, (A4)
@@ -217,7 +217,7 @@ def interface_solve(state, t, h, model, solid, cache, slot, cfg, work):
         if ok or not cfg.newton:
             if ok:
                 trial.iteration_noise = iteration_noise(state, work, nn, m2)
-            X[:] = G
+            core.copy1(X, G)
             if ok:
                 trial.iterations = it
                 return core.CONVERGED, it
@@ -233,6 +233,6 @@ def interface_solve(state, t, h, model, solid, cache, slot, cfg, work):
             trial.matrix_iteration = it  # built at this iteration of this step (0: inherited from the last step)
         elif it == 1:
             trial.matrix_iteration = 0
-        unknowns.X_prev[:] = X
+        core.copy1(unknowns.X_prev, X)
         newton_step(work, cache, slot, solid.frame, model.law)
     return core.NO_CONVERGENCE, cfg.max_iterations

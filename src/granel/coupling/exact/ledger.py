@@ -12,6 +12,7 @@ import numpy as np
 from ...granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK
 from ...granular.kernels import load_value, overlaps
 from ...guard.jit import njit
+from .. import core
 from ..observation import energy_ledger, granular_energy, modal_energy
 from .operators import modes_of_contacts, propagate_mode
 from .state import GRID_PER_OCTAVE
@@ -38,7 +39,7 @@ def trial_ledger(state, solid, cache, slot, model, work):
     nr = state.eta.shape[0]
     nn = cache.nodes.shape[0] - 1
     if nr > 0:
-        unknowns.modal_force[0, :] = state.q
+        core.copy1(unknowns.modal_force[0], state.q)
         modes_of_contacts(unknowns.X.reshape(nn, m2), solid.P, unknowns.modal_force[1:])
     free = cache.free[slot, nn - 1]
     disp, vel = cache.end_disp[slot], cache.end_vel[slot]

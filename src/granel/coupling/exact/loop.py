@@ -29,33 +29,33 @@ def accept(state, cache, slot, h, work, ledger):
     nb = cache.nodes.shape[0]
     nn = nb - 1
     last = state.last
-    last.y0[:] = state.y
-    last.eta0[:] = state.eta
-    last.etad0[:] = state.etad
-    last.Fs[0, :, :] = state.F
+    core.copy1(last.y0, state.y)
+    core.copy1(last.eta0, state.eta)
+    core.copy1(last.etad0, state.etad)
+    core.copy2(last.Fs[0], state.F)
     for b in range(1, nb):
         for r in range(m2):
             last.Fs[b, r // 2, r % 2] = unknowns.X[(b - 1) * m2 + r]
-    last.qs[:, :] = unknowns.modal_force  # from `ledger.trial_ledger`
-    last.Ts[:, :] = cache.T[slot]
-    state.eta[:] = unknowns.eta_end
-    state.etad[:] = unknowns.etad_end
-    state.F[:, :] = last.Fs[nb - 1]
-    state.q[:] = last.qs[nb - 1]
-    state.u[:] = nodes.u[nn - 1]
-    state.w[:] = nodes.w[nn - 1]
+    core.copy2(last.qs, unknowns.modal_force)  # from `ledger.trial_ledger`
+    core.copy2(last.Ts, cache.T[slot])
+    core.copy1(state.eta, unknowns.eta_end)
+    core.copy1(state.etad, unknowns.etad_end)
+    core.copy2(state.F, last.Fs[nb - 1])
+    core.copy1(state.q, last.qs[nb - 1])
+    core.copy1(state.u, nodes.u[nn - 1])
+    core.copy1(state.w, nodes.w[nn - 1])
     mo, sm = nodes.motion, last.motion
-    sm.u0[:, :] = mo.u0
-    sm.v0[:, :] = mo.v0
-    sm.a[:, :] = mo.a
-    sm.j[:, :] = mo.j
-    sm.d4[:, :] = mo.d4
-    sm.d5[:, :] = mo.d5
-    state.y[:] = granular.y
-    state.dy[:] = granular.dy_end
+    core.copy2(sm.u0, mo.u0)
+    core.copy2(sm.v0, mo.v0)
+    core.copy2(sm.a, mo.a)
+    core.copy2(sm.j, mo.j)
+    core.copy2(sm.d4, mo.d4)
+    core.copy2(sm.d5, mo.d5)
+    core.copy1(state.y, granular.y)
+    core.copy1(state.dy, granular.dy_end)
     end = node_iface(unknowns, nn - 1)
-    state.normal[:] = end.normal
-    state.vrel[:] = end.vrel
+    core.copy1(state.normal, end.normal)
+    core.copy1(state.vrel, end.vrel)
     clock = state.clock[0]
     clock.t_start = clock.t
     clock.t += h
@@ -134,9 +134,9 @@ def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, lo
             o = done[0] + filled
             tau = targets[o] - t
             if tau >= h * (1.0 - 1e-12):
-                oy[o, :] = work.granular.y
-                oeta[o, :] = unknowns.eta_end
-                oetad[o, :] = unknowns.etad_end
+                core.copy1(oy[o], work.granular.y)
+                core.copy1(oeta[o], unknowns.eta_end)
+                core.copy1(oetad[o], unknowns.etad_end)
                 for r in range(2 * nc):
                     oF[o, r // 2, r % 2] = unknowns.X[(nb - 2) * 2 * nc + r]
             else:
@@ -162,7 +162,7 @@ def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, lo
         log.t[k] = clock.t
         log.h[k] = h
         log.iterations[k] = its
-        log.lam[k, :] = lam
+        core.copy1(log.lam[k], lam)
         k += 1
         clock.level = next_level(clock.level, ectl, cfg)
         clock.grid_level = grid_level(clock.level)

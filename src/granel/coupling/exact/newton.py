@@ -111,8 +111,8 @@ def local_friction_solve(s, s0, vt0, normal, B, law, r, Jl):
             lam *= 0.5
         if tn >= norm:
             return
-        s[:] = trial[:nn]
-        r[:nn] = rt[:nn]
+        core.copy1(s, trial[:nn])
+        core.copy1(r[:nn], rt[:nn])
         norm = tn
 
 
@@ -178,7 +178,7 @@ def newton_matrix(work, cache, slot, frame):
     for a in range(na):
         for b in range(na):
             newton.matrix[a, b] = M[idx[a], idx[b]] + (1.0 if a == b else 0.0)
-    return na == 0 or core.lu_factor(newton.matrix, na, newton.pivots_touching)
+    return na == 0 or core.lu_factor(newton.matrix, np.int64(na), newton.pivots_touching)  # typed: one signature
 
 
 @njit(cache=True)

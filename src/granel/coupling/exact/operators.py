@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...guard.jit import njit
+from .. import core
 from ...solid.propagation import interpolation_taylor, weights_at
 
 
@@ -29,8 +30,8 @@ def ensure_ops(cache, solid, slot, h):
         tau = nodes[j + 1] * h
         weights_at(omega, tau, T, cache.free[slot, j], disp, vel)
         for b in range(nb):
-            cache.Cu[slot, j, b, :, :] = np.dot(P * disp[:, b].copy(), P.T)
-            cache.Cw[slot, j, b, :, :] = np.dot(P * vel[:, b].copy(), P.T)
+            core.copy2(cache.Cu[slot, j, b], np.dot(P * disp[:, b].copy(), P.T))
+            core.copy2(cache.Cw[slot, j, b], np.dot(P * vel[:, b].copy(), P.T))
             i1 = 0.0
             i2 = 0.0
             fact = 1.0
@@ -40,8 +41,8 @@ def ensure_ops(cache, solid, slot, h):
                 i2 += T[b, k] * tau ** (k + 2) / (fact * (k + 2))
             cache.I1[slot, j, b] = i1
             cache.I2[slot, j, b] = i2
-    cache.end_disp[slot, :, :] = disp  # the last node is the step's end
-    cache.end_vel[slot, :, :] = vel
+    core.copy2(cache.end_disp[slot], disp)  # the last node is the step's end
+    core.copy2(cache.end_vel[slot], vel)
     cache.ready[slot] = slot < cache.ready.shape[0] - 1  # the off-grid slot is recomputed each time
 
 

@@ -87,6 +87,7 @@ class ExactSolver:
         self.kinks = np.array(sorted(k for k in kinks if np.isfinite(k) and k > 0), float)
         self.log = core.step_log(nc)
         self._batch = None
+        self._proj = None
 
     # ------------------------------------------------------------ state
     def start(self) -> None:
@@ -191,7 +192,9 @@ class ExactSolver:
             Phi, PsiZ = self.nodal
             return {"q": (eta[:, :nk] @ Phi.T + eta[:, nk:] @ PsiZ.T).astype(np.float32),
                     "v": (etad[:, :nk] @ Phi.T + etad[:, nk:] @ PsiZ.T).astype(np.float32)}
-        proj = self.residual_Z.T @ self.P_drop / self.omega_drop**2  # residual -> dropped modes
+        if self._proj is None:  # residual -> dropped modes, the same at every batch
+            self._proj = self.residual_Z.T @ self.P_drop / self.omega_drop**2
+        proj = self._proj
         out = {}
         for key, x in (("eta", eta), ("eta_dot", etad)):
             full = np.empty((len(x), nk + len(self.omega_drop)), np.float32)
