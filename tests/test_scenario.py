@@ -202,7 +202,7 @@ def test_close_pairs_match_a_kd_tree(n):
     the pairs scipy's k-d tree finds, on random points with a cut-off of a few spacings."""
     from scipy.spatial import cKDTree
 
-    from granel.granular.system import close_pairs
+    from granel.granular.neighbours import close_pairs
 
     pos = np.random.default_rng(n).uniform(0, 1, size=(n, 2))
     cutoff = 3.0 / np.sqrt(n)

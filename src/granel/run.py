@@ -8,6 +8,7 @@ May import: scenario, problem, coupling, solid, granular, io, guard."""
 
 from __future__ import annotations
 
+import time
 import tomllib
 from pathlib import Path
 
@@ -60,8 +61,6 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     """Solve a built problem and return its result Dataset (a `io.results.ResultSpec` with
     dataset=False: no xarray needed), after at most `max_wall` seconds of solving
     (`coupling.driver.WallTimeExceeded` beyond)."""
-    import time
-
     from .guard.fingerprints import encode
 
     start = time.perf_counter()
@@ -96,8 +95,6 @@ def run_scenario(sc: S.Scenario, progress=None, checkpoint=None, resume=None, ma
                  dataset: bool = True):
     """Run a validated scenario and return its result Dataset (or `io.results.ResultSpec`); its
     `build_s` attribute is the time building the problem took."""
-    import time
-
     start = time.perf_counter()
     problem = S.build_problem(sc)
     build_s = time.perf_counter() - start

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .neighbours import close_pairs
+
 # touching within round-off of the positions (a table written with finite decimals)
 ROUND_OFF = 1e-9
 
@@ -35,8 +37,6 @@ class Overlap:
 
 
 def pair_overlaps(pos: np.ndarray, radius: np.ndarray, labels) -> Overlap | None:
-    from .system import close_pairs
-
     if len(pos) < 2:
         return None
     pairs = close_pairs(pos, 2 * float(radius.max()))

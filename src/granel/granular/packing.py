@@ -17,6 +17,7 @@ import numpy as np
 
 from .loads import WallDrive
 from .materials import Material
+from .neighbours import close_pairs
 
 
 @dataclass(frozen=True)
@@ -152,15 +153,6 @@ def _spaced(layout, name: str):
     raise ValueError(f"medium {name}: no spacing within {lam:.1e} of its radii clears every contact in floating point")
 
 
-def _touching(pos: np.ndarray, reach: float) -> np.ndarray:
-    """Index pairs (i < j) of centres closer than `reach` (the neighbours of a lattice): compared
-    directly below `system.DIRECT_PAIRS` granules, so that building a scenario does not import
-    scipy.spatial."""
-    from .system import close_pairs
-
-    return close_pairs(pos, reach).reshape(-1, 2)
-
-
 def hexagonal_columns(
     name: str,
     columns: list[int],
@@ -245,7 +237,7 @@ def hexagonal_columns(
         face_ok = None
         if side != "none":  # column 0 against the solid's face
             face_ok = lambda p, r: _face_clear(p[contact], r[contact], face, side)  # noqa: E731
-        return pos, rad, out, _touching(pos, 2 * R * (1 + 1e-9)), face_ok
+        return pos, rad, out, close_pairs(pos, 2 * R * (1 + 1e-9)), face_ok
 
     pos, out = _spaced(layout, name)
     return Medium(name, lab, pos, np.full(n, R), material, side, out, contact)

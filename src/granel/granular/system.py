@@ -18,6 +18,7 @@ from .materials import pair_coefficients, point_coefficient, sphere_inertia, sph
 from . import kernels
 from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
     state_size, still
+from .neighbours import close_pairs
 from .packing import Medium, Wall
 
 
@@ -223,25 +224,6 @@ class NeighbourList:
     ref_pos: np.ndarray
     pairs: Pairs
     walls: Walls
-
-
-# below this many granules, all pairs are compared directly (n^2 / 2 distances, a few MB at most);
-# above, a k-d tree finds them (scipy.spatial is imported only then: its import is slow)
-DIRECT_PAIRS = 2000
-
-
-def close_pairs(pos: np.ndarray, cutoff: float) -> np.ndarray:
-    """The pairs (i < j) of points closer than `cutoff`, as an (m, 2) integer array."""
-    n = len(pos)
-    if n < 2:
-        return np.zeros((0, 2), np.int64)
-    if n > DIRECT_PAIRS:
-        from scipy.spatial import cKDTree
-
-        return cKDTree(pos).query_pairs(cutoff, output_type="ndarray").astype(np.int64)
-    i, j = np.triu_indices(n, 1)
-    close = np.hypot(*(pos[j] - pos[i]).T) <= cutoff
-    return np.stack([i[close], j[close]], axis=1).astype(np.int64)
 
 
 def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:

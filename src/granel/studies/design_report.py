@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, confirmed_trials, design_scenario, design_warnings,
-                     evaluate_trial, trial_case)
+from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, design_warnings, evaluate_trial,
+                     trial_case)
+from .screening import confirmed_trials
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
 # its improvement over the base, whichever is larger) before the report flags it
@@ -369,7 +370,7 @@ def screening_summary(spec: DesignSpec, study) -> dict | None:
     if not conf:
         return {"rows": [], "tau": math.nan, "best_screened_rank": None, "max_change": math.nan,
                 "max_change_rel": math.nan}
-    screened = np.array([t._trial.values for t in conf], float)
+    screened = np.array([t.screened_values for t in conf], float)
     full = np.array([t.values for t in conf], float)
     rank = lambda x: np.argsort(np.argsort(sign * x, kind="stable"), kind="stable") + 1  # noqa: E731
     rs, rf = rank(screened[:, 0]), rank(full[:, 0])
@@ -522,16 +523,19 @@ def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None
 
     held = {}
 
-    def finishing(study, client):  # the re-evaluation on the study's own workers
-        if reporting is not None:
+    def report_starts():
+        if reporting is not None and not held.get("reported"):
             reporting()
+        held["reported"] = True
+
+    def finishing(study, client):  # the re-evaluation on the study's own workers
+        report_starts()
         best = best_trials(spec, study)
         if best:
             held["rows"] = reevaluate(spec, base_dir, out, best, client)
 
     res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False,
                      confirming=confirming, finishing=finishing)
-    if reporting is not None and "rows" not in held:
-        reporting()
+    report_starts()
     res["files"] += write_study_report(spec, base_dir, res["study"], out, held.get("rows"))
     return res

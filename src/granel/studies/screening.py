@@ -65,6 +65,11 @@ class ConfirmedTrial:
     def __getattr__(self, name):
         return getattr(self._trial, name)
 
+    @property
+    def screened_values(self) -> list[float]:
+        """The objective values at the trials' (screened) accuracy."""
+        return list(self._trial.values)
+
 
 def confirmed_trials(spec, study) -> list:
     """The confirmed trials of a screened study that ran ok at the design's own accuracy, as
