@@ -1,6 +1,6 @@
 """Processes that start at once compile granel's kernels once (`granel.guard.jit`): a process that
-misses a kernel compiles it holding the cache folder's compile lock, and the others wait for the
-lock and load what it saved; a wait is bounded, with a message naming the holder."""
+misses a kernel compiles it holding that kernel's compile lock, and the others wait for the lock
+and load what it saved; a wait is bounded, with a message naming the holder."""
 
 import os
 import subprocess
@@ -23,9 +23,13 @@ def f(x):
 # holds the compile lock (as a compile in progress does) for HOLD s, then compiles f under it
 HOLDER = """\
 import sys, time
+from pathlib import Path
 import kern
 from granel.guard import jit
-jit._COMPILING["fd"] = jit._compile_lock(jit.cache_folder((kern.here / "kern.py",), kern.here))
+cache = kern.f._cache
+base = Path(cache._cache_file._index_path).name.removesuffix(".nbi")
+path = jit.compile_lock_path(Path(cache._cache_path), base)
+jit._COMPILING["held"][path] = (1, jit._compile_lock(path))
 print("locked", flush=True)
 time.sleep(float(sys.argv[1]))
 if sys.argv[2] == "compile":
@@ -101,8 +105,9 @@ def test_the_lock_is_released_when_a_compile_fails(tmp_path):
     env = _package(tmp_path)
     code = ("import kern\nfrom granel.guard import jit\n"
             "try:\n    kern.f('a', 'b')\nexcept Exception:\n    pass\n"
-            "assert jit._COMPILING == {'depth': 0, 'fd': None}, jit._COMPILING\nprint(kern.f(2))\n")
+            "assert jit._COMPILING == {'depth': 0, 'held': {}}, jit._COMPILING\nprint(kern.f(2))\n")
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
                          check=True, timeout=300)
     assert out.stdout.split() == ["3"]
-    assert jit.COMPILE_LOCK in os.listdir(jit.cache_folder((tmp_path / "kern.py",), tmp_path))
+    locks = [p.name for p in jit.cache_folder((tmp_path / "kern.py",), tmp_path).rglob(".granel-compile-*.lock")]
+    assert [name.startswith(".granel-compile-kern.f-") for name in locks] == [True], locks

@@ -12,9 +12,12 @@ every file's size and CRC-32), recorded after numba saves a kernel (`_record_ker
 whose files do not match it is removed and compiled again (`_check_kernel`).
 
 Processes that start at once (a study's workers) compile each kernel once: a process that misses
-a kernel in the cache compiles it holding the folder's compile lock (`COMPILE_LOCK`), and the
-others wait for that lock and then load what it saved (`_compile_lock`), at most `COMPILE_WAIT_S`
-(then `CompileWaitTimeout`, naming the holder)."""
+a kernel in the cache compiles it holding that kernel's compile lock (`compile_lock_path`), and
+the others wait for that lock and then load what it saved (`_compile_lock`), at most
+`COMPILE_WAIT_S` (then `CompileWaitTimeout`, naming the holder). One lock per kernel, so that
+processes can compile different kernels at once (`guard.ahead`); a process holds only the locks
+of the kernels on its current chain of compiles, a path down the call graph, so two processes
+cannot wait for each other."""
 
 from __future__ import annotations
 
@@ -138,7 +141,7 @@ def cached_njit(sources, home: Path = PACKAGE):
 
         def apply(fn):
             with _cache_dir(folder()):
-                return checked(deco(fn), folder())
+                return checked(deco(fn))
         return apply
 
     return njit
@@ -153,28 +156,31 @@ _LISTINGS: dict = {}  # folder -> ((device, inode, mtime_ns) of the folder, its 
 _NOTED: set = set()
 
 
-def checked(dispatcher, lock_folder: Path | None = None):
+def checked(dispatcher):
     """`dispatcher` (a numba.njit with cache=True) with its cache checked before each load
     (`_check_kernel`) and recorded after each save (`_record_kernel`). A kernel whose damaged
     files cannot be removed is compiled without the cache. A kernel missing from the cache is
-    compiled under the compile lock of `lock_folder` (its own cache folder by default), after
-    one more look at the cache once the lock is held (`_compile_lock`)."""
+    compiled under its compile lock (`compile_lock_path`), after one more look at the cache
+    once the lock is held (`_compile_lock`)."""
     cache = getattr(dispatcher, "_cache", None)
     index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
     if index is None:  # no disk cache (numba found no folder to write): nothing to check
         return dispatcher
     folder, base = Path(cache._cache_path), Path(index).name.removesuffix(".nbi")
-    lock_folder = folder if lock_folder is None else Path(lock_folder)
+    lock = compile_lock_path(folder, base)
     load, save = cache.load_overload, cache.save_overload
 
     def load_overload(sig, target_context):
-        if _COMPILING["fd"] is None and _check_kernel(folder, base, remove=False):
+        held = lock in _COMPILING["held"]
+        if not held and _check_kernel(folder, base, remove=False):
             got = load(sig, target_context)
             if got is not None:
                 return got
-        if _COMPILING["fd"] is None and _COMPILING["depth"]:
+        if not held and _COMPILING["depth"]:
             # a miss, or files another process is writing: look again once the lock is held
-            _COMPILING["fd"] = _compile_lock(lock_folder)
+            fd = _compile_lock(lock)
+            if fd is not None:
+                _COMPILING["held"][lock] = (_COMPILING["depth"], fd)
         if not _check_kernel(folder, base):
             cache.disable()
         return load(sig, target_context)
@@ -190,10 +196,17 @@ def checked(dispatcher, lock_folder: Path | None = None):
 
 # ---------------------------------------------------------------- one compile for all processes
 
-COMPILE_LOCK = ".granel-compile.lock"
+COMPILE_LOCK = ".granel-compile-{}.lock"
 COMPILE_WAIT_S = 1200.0  # the longest wait for another process's compile (a cold compile: about a minute)
 COMPILE_NOTE_S = 2.0  # a wait longer than this is announced (once per process)
-_COMPILING = {"depth": 0, "fd": None}  # nesting of compiles in this process; the lock's descriptor
+# the nesting of compiles in this process, and the compile locks it holds: {path: (depth, descriptor)}
+_COMPILING = {"depth": 0, "held": {}}
+HELPERS: set = set()  # the processes this one started to compile ahead of it (their pids)
+
+
+def compile_lock_path(folder: Path, base: str) -> Path:
+    """The compile lock of the kernel whose cache files are `folder`/`base`.*"""
+    return Path(folder) / COMPILE_LOCK.format(base)
 
 
 class CompileWaitTimeout(GranelError, RuntimeError):
@@ -204,30 +217,32 @@ class CompileWaitTimeout(GranelError, RuntimeError):
 
 def _locked_compile(compile_):
     """numba's `Dispatcher.compile` counting the nesting of compiles: the compile lock a miss took
-    (`checked`) is released when the outermost compile ends, whatever ends it."""
+    (`checked`) is released when the compile that took it ends (after numba saved the kernel),
+    whatever ends it."""
 
     from numba.core.compiler_lock import global_compiler_lock
 
     def compile(sig):
         with global_compiler_lock:  # numba's own (re-entrant): one thread of a process compiles at a time
             _COMPILING["depth"] += 1
+            depth = _COMPILING["depth"]
             try:
                 return compile_(sig)
             finally:
                 _COMPILING["depth"] -= 1
-                if _COMPILING["depth"] == 0 and _COMPILING["fd"] is not None:
-                    fd, _COMPILING["fd"] = _COMPILING["fd"], None
-                    os.close(fd)  # releases the lock
+                held = _COMPILING["held"]
+                for path in [p for p, (d, _) in held.items() if d >= depth]:
+                    os.close(held.pop(path)[1])  # releases the lock
 
     return compile
 
 
-def _compile_lock(folder: Path, wait_s: float | None = None):
-    """The exclusive compile lock of `folder` (a descriptor; closing it releases the lock, as the
-    end of the process does), its holder's token written in it; waits while another process
-    holds it, announcing a wait beyond COMPILE_NOTE_S, and raises CompileWaitTimeout after
-    `wait_s` (COMPILE_WAIT_S). None where the system has no flock or the folder is not writable
-    (the compile then goes ahead unlocked)."""
+def _compile_lock(path: Path, wait_s: float | None = None):
+    """The exclusive lock `path` (a descriptor; closing it releases the lock, as the end of the
+    process does), its holder's token written in it; waits while another process holds it,
+    announcing a wait beyond COMPILE_NOTE_S, and raises CompileWaitTimeout after `wait_s`
+    (COMPILE_WAIT_S). None where the system has no flock or the folder is not writable (the
+    compile then goes ahead unlocked)."""
     import time
 
     try:
@@ -235,7 +250,8 @@ def _compile_lock(folder: Path, wait_s: float | None = None):
     except ImportError:
         return None
     wait_s = COMPILE_WAIT_S if wait_s is None else wait_s
-    path = folder / COMPILE_LOCK
+    path = Path(path)
+    folder = path.parent
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
@@ -255,15 +271,25 @@ def _compile_lock(folder: Path, wait_s: float | None = None):
                     f"compiled-kernel cache: waited {waited:.0f} s for {holder} to compile granel's kernels into "
                     f"{folder} (it holds {path}); let it finish or stop it, or give this process another cache "
                     "(NUMBA_CACHE_DIR)") from None
-            if waited > COMPILE_NOTE_S:
-                _note(("compile-wait", folder), f"compiled-kernel cache: waiting for {_holder(fd)}, which compiles "
-                      f"granel's kernels into {folder} (at most {wait_s:.0f} s)")
-            time.sleep(0.05 if waited < 1.0 else 0.25)
+            if waited > COMPILE_NOTE_S and not _own_helper(fd):
+                _note(("compile-wait",), f"compiled-kernel cache: waiting for {_holder(fd)}, which compiles "
+                      f"granel's kernels into {folder} (at most {wait_s:.0f} s per kernel)")
+            time.sleep(0.02)  # short: a process may wait for many small kernels in turn
         except OSError:
             os.close(fd)
             return None
     _claim(fd)
     return fd
+
+
+def _own_helper(fd: int) -> bool:
+    """Whether the lock's holder is a process this one started to compile ahead (`guard.ahead`):
+    a wait for it is part of this process's own compile, not announced."""
+    try:
+        token = os.pread(fd, 200, 0).decode("ascii", "replace").strip()
+        return int(token.rsplit("-", 2)[-2]) in HELPERS
+    except (OSError, ValueError, IndexError):
+        return False
 
 
 def _holder(fd: int) -> str:

@@ -169,3 +169,21 @@ def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, lo
         if moved_beyond(state.y, n, ref_pos, lim2):
             return core.REBUILD, k
     return core.DONE, k
+
+
+def compile_plan(state, model, ref_pos, solid, cache, cfg, targets, kinks, log, out, done):
+    """The kernels `advance_outputs` calls, with arguments of the types it calls them with, in the
+    order a second process compiles them ahead of the first (`guard.ahead`): the first reaches
+    `interface_solve`, the largest, last of its early callees, then takes the others in call
+    order while this one takes them from the end. Called with `advance_outputs`'s arguments;
+    the signatures must stay those of the calls above (tests/test_compile_ahead.py)."""
+    nc, nr, nb = state.F.shape[0], state.eta.shape[0], cache.nodes.shape[0]
+    work = work_for.py_func(state.y, nc, nr, nb)  # in Python: the first process compiles work_for
+    t, h, slot, ledger = float(state.clock[0]["t"]), float(cfg.h_max), 0, float(state.clock[0]["ledger"])
+    oy, oeta, oetad, _ = out
+    yield interface_solve, (state, t, h, model, solid, cache, slot, cfg, work)
+    yield accept, (state, cache, slot, h, work, ledger)
+    yield friction_slopes, (state, model.law, cache, slot, solid.frame, np.zeros(nc))
+    yield state_ledger, (oy[0], oeta[0], oetad[0], solid, model)
+    yield trial_step, (state, cache, slot, work)
+    yield step_error, (work, cfg, model.granules, t, h, ledger, ledger, ledger)

@@ -8,6 +8,7 @@ import numpy as np
 from ...granular.bundles import Motion
 from ...granular.kernels import rhs
 from ...granular.system import GranularState, GranularSystem, Stepper
+from ...guard.ahead import compile_ahead
 from ...solid.base import SolidModel
 from ...solid.modal import at_dofs
 from ...solid.reduction import residual_modes, static_modes
@@ -93,6 +94,7 @@ class ExactSolver:
     def start(self) -> None:
         nr, nc = len(self.solid.omega), len(self.system.solid_contacts)
         y = self.y0.copy()
+        self._compile_ahead(y, nr, nc)
         dy = np.zeros_like(y)
         F0, eta0 = static_modes(self.preload, self.solid.P, self.solid.omega**2, nc)
         u0 = self.solid.P @ eta0 if nr else np.zeros(2 * nc)
@@ -107,6 +109,15 @@ class ExactSolver:
         self._set_batch(0, 1, (y[None].copy(), eta0[None].copy(), np.zeros((1, nr)), F0[None].copy()))  # the output at t = 0
         clock = self.st.clock[0]
         clock["ledger"] = clock["ledger_start"] = float(self._batch["observation"].ledger[0])
+
+    def _compile_ahead(self, y, nr: int, nc: int) -> None:
+        """When the step loop is not compiled yet, a second process compiles the kernels it calls
+        last (`loop.compile_plan`) while this one compiles the others (`guard.ahead`)."""
+        st = initial_state(y, np.zeros_like(y), nr, nc, len(self.cache.nodes), 0.0, 0)
+        out = (np.empty((1, len(y))), np.empty((1, nr)), np.empty((1, nr)), np.empty((1, nc, 2)))
+        self._ahead = compile_ahead(advance_outputs, "granel.coupling.exact.loop:compile_plan",
+                                    (st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache, self.cfg,
+                                     np.zeros(1), self.kinks, self.log, out, np.zeros(1, np.int64)))
 
     def checkpoint(self) -> dict:
         st = self.st

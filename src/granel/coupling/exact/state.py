@@ -242,8 +242,8 @@ def work_for(y, nc, nr, nb):
     nn = nb - 1
     n = nn * m2
     trial = np.zeros(1, dtype=TRIAL)
-    trial[0].matrix_level = -1
-    trial[0].iterations = 99
+    trial[0]["matrix_level"] = -1  # by key: the same in Python (`loop.compile_plan`)
+    trial[0]["iterations"] = 99
     granular = Granular(y=np.empty_like(y), stages=np.empty((5, y.shape[0])), dy_end=np.empty_like(y), err=np.zeros_like(y),
                         y_node=np.empty_like(y))
     nodes = Nodes(u=np.zeros((nn, m2)), w=np.zeros((nn, m2)), u_free=np.zeros((nn, m2)), w_free=np.zeros((nn, m2)),
