@@ -144,7 +144,7 @@ RECORD_DIMS = {
     "granule_radius": ("granule",), "granule_mass": ("granule",), "granule_inertia": ("granule",),
     "granule_modulus": ("granule",), "granule_poisson": ("granule",), "granule_position0": ("granule", "xy"),
     "wall_p0": ("wall", "xy"), "wall_p1": ("wall", "xy"), "wall_normal": ("wall", "xy"), "wall_medium": ("wall",),
-    "wall_drive": ("wall", "wall_drive_param"), "contact_granule": ("contact",), "contact_position": ("contact", "xy"),
+    "wall_drive": ("wall", "wall_drive_param"), "wall_damped": ("wall",), "contact_granule": ("contact",), "contact_position": ("contact", "xy"),
     "contact_normal": ("contact", "xy"), "contact_dofs": ("contact", "contact_dof"),
     "solid_node_position": ("solid_node", "xy"), "solid_element_nodes": ("solid_element", "element_node"),
     "load_granule": ("load",), "load_direction": ("load", "xy"), "load_kind": ("load",),
