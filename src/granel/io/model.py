@@ -108,8 +108,8 @@ def model_record(system, solid) -> ResultModel:
     if [c.name for c in system.solid_contacts] != [c.name for c in solid.contacts]:
         raise ValueError("the granular system's solid contacts and the solid's contact points differ")
     walls = tuple(WallRecord(label, _pair(w.p0), _pair(w.p1), _pair(w.normal), w.medium,
-                             tuple(float(x) for x in w.drive.params()) if w.drive is not None else (0.0,) * DRIVE_PARAMS,
-                             bool(w.damped))
+                             tuple(float(x) for x in w.drive.params()) if w.drive is not None
+                             else (0.0,) * DRIVE_PARAMS, bool(w.damped))
                   for label, w in zip(wall_names(system), system.walls))
     contacts = tuple(ContactRecord(p.name, int(c.granule), _pair(c.point), _pair(c.normal), (p.dof_x, p.dof_y, p.dof_rotation))
                      for c, p in zip(system.solid_contacts, solid.contacts))
@@ -248,8 +248,9 @@ def read_record(ds, name="result") -> ResultModel:
     if not np.isin(damped, (0, 1)).all():
         raise bad("wall_damped is neither 0 nor 1")
     walls = tuple(WallRecord(str(lab), tuple(p0), tuple(p1), tuple(nrm), str(m), tuple(float(x) for x in d), bool(dmp))
-                  for lab, p0, p1, nrm, m, d, dmp in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"), f("wall_normal"),
-                                                         ds["wall_medium"].values, f("wall_drive"), damped))
+                  for lab, p0, p1, nrm, m, d, dmp in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"),
+                                                         f("wall_normal"), ds["wall_medium"].values, f("wall_drive"),
+                                                         damped))
     contacts = tuple(ContactRecord(str(lab), int(g), tuple(p), tuple(nrm), tuple(int(x) for x in d))
                      for lab, g, p, nrm, d in zip(ds["contact"].values, granule, f("contact_position"), f("contact_normal"),
                                                   cdofs))

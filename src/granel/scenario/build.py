@@ -66,7 +66,8 @@ def build_media(sc: Scenario, base: Path | None = None):
             except ValueError as e:
                 raise ScenarioError(f"media.{k}: {e}") from None
         if m.undamped_walls:
-            med.walls = [replace(w, damped=False) if w.name.split(":", 1)[1] in m.undamped_walls else w for w in med.walls]
+            med.walls = [replace(w, damped=False) if w.name.split(":", 1)[1] in m.undamped_walls else w
+                         for w in med.walls]
         media.append(med)
     return media
 
