@@ -348,6 +348,10 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
                 if f_top > f_bound * (1.0 + 1e-3) else
                 f"a second oscillation of {leak:.2g} of the mode's amplitude beside it (the motion is not the linearised "
                 "chain's modes)")
+        kind = str(ds.attrs.get("solid_kind", "rigid"))
+        if kind != "rigid" and any(e.holder == "solid" for e in chain.ends):
+            longer = (f"the chain presses on the {kind}, whose motion at the contact couples the chain to the solid's "
+                      f"modes: end the chain on a wall or on a rigid solid (solid.kind = \"rigid\"); or {longer}")
         raise CutoffError(f"the fit of the top mode's coordinate finds {what}: {longer}")
     if span * f_top < min_periods:
         raise CutoffError(f"the free response ({span:.3g} s) holds {span * f_top:.1f} periods of the top mode "
