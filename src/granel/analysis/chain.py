@@ -12,10 +12,10 @@ The infinite chains' band edges (`band_edges`, Brillouin, "Wave propagation in p
 structures", 1946, ch. 1; Kittel, "Introduction to solid state physics", ch. 4, "two atoms per
 primitive basis"), for beads of mass m joined by springs K:
 - monatomic: w^2 = (4 K / m) sin^2(q a / 2), the cut-off w_c = 2 sqrt(K / m);
-- diatomic, masses m1 > m2 alternating (every spring joins a heavy bead to a light one, so one K):
-  w^2 = K (1/m1 + 1/m2) -+ K sqrt((1/m1 + 1/m2)^2 - 4 sin^2(q a) / (m1 m2)); at the zone
-  boundary (sin^2 = 1) the acoustic band tops at sqrt(2 K / m1), the optical band starts at
-  sqrt(2 K / m2), and it ends (q = 0) at sqrt(2 K (1/m1 + 1/m2)).
+- diatomic, masses m1 > m2 alternating (every spring joins a heavy bead to a light one, so one K),
+  a the cell's length: w^2 = K (1/m1 + 1/m2) -+ K sqrt((1/m1 + 1/m2)^2 - 4 sin^2(q a / 2) /
+  (m1 m2)); at the zone boundary (q a = pi) the acoustic band tops at sqrt(2 K / m1), the optical
+  band starts at sqrt(2 K / m2), and it ends (q = 0) at sqrt(2 K (1/m1 + 1/m2)).
 """
 
 from __future__ import annotations

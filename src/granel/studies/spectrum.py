@@ -515,10 +515,13 @@ def plot_spectrum(ds: xr.Dataset, output):
             ax_n.plot(f, np.where(ok, nr, np.nan), "-o", color=c, ms=3, label=f"{a:g} N" if a is not None else None)
             ax_n.plot(f[~ok], nr[~ok], "o", mfc="none", color=c, ms=3)
     if "transmissibility_linear" in sub:  # the linearised chain, at the same frequencies
-        for d, style in zip(sub["direction"].values, ("-", "--")):  # a wide grey band under the measured curves
-            for ax, name in ((ax_t, "transmissibility_linear"), (ax_m, "mobility_linear")):
-                ax.plot(f, sub[name].sel(direction=d).values, style, color="0.4", lw=4, alpha=0.35, zorder=0,
-                        label=f"linearised chain, {d}")
+        for ax, name in ((ax_t, "transmissibility"), (ax_m, "mobility")):
+            measured = sub[name].values[np.isfinite(sub[name].values) & (sub[name].values > 0)]
+            for d, style in zip(sub["direction"].values, ("-", "--")):  # a wide grey band under the measured curves
+                ax.plot(f, sub[f"{name}_linear"].sel(direction=d).values, style, color="0.4", lw=4, alpha=0.35,
+                        zorder=0, label=f"linearised chain, {d}")
+            if measured.size:  # the linear chain's stop band falls far below any run's floor: keep the runs in view
+                ax.set_ylim(bottom=measured.min() / 10, top=measured.max() * 10)
     if "band_edge_hz" in sub:
         for ax in (ax_t, ax_m):
             for k, (name, edge) in enumerate(zip(sub["band_edge"].values, sub["band_edge_hz"].values)):
