@@ -241,6 +241,49 @@ def test_an_undamped_wall_is_a_spring_without_dashpot_in_the_linear_chain():
     assert chain.damping == pytest.approx([want] * 3, rel=1e-9)  # delta0 from the equilibrium, to 1e-10 of F0
 
 
+# ---------------------------------------------------------------- granel spectrum's band measures
+
+def test_the_spectrum_dataset_carries_the_band_measures_with_units():
+    """A spectrum's summary whose measured curves are a hand-made chain's exact response (six
+    beads, the last on a wall): its band measures equal the linearised chain's levels exactly
+    (the same values on the same frequencies), and each measured edge, interpolated, lies in the
+    same grid step as the linearised chain's exact one; units on every band variable, the
+    infinite chain's cut-off, and a report with the table. Without a chain the measured figures
+    stand alone and the report says why."""
+    from granel.studies.spectrum import BAND_MEASURES, case_metric_units, spectrum_dataset, spectrum_report
+    from granel.studies.sweep import cases, spectrum_sweep, summary_dataset
+
+    K, m = 1.2e7, 4.1e-3
+    chain = hand_chain([m] * 6, [K] * 5, [2.0] * 5, (ChainEnd(), ChainEnd("far", 2 * K, 4.0)))
+    f = np.linspace(3e3, 24e3, 15)
+    spec = spectrum_sweep("paper", [], list(f), [0.1], drive="C:1", measure="C:6", both_directions=False)
+    results = []
+    for case in cases(spec):
+        r = chain_response(chain, f[case["index"][0]], "C:1")
+        metrics = dict.fromkeys(case_metric_units(spec.spectrum), 0.0)
+        metrics.update(transmissibility_fwd=abs(r.velocity[-1] / r.velocity[0]), mobility_fwd=abs(r.velocity[-1]),
+                       wall_force_fwd=abs(r.end_force[1]))
+        results.append({"index": case["index"], "status": "ok", "metrics": metrics})
+    summary = summary_dataset(spec, results)
+    ds = spectrum_dataset(summary, spec.spectrum, chain)
+    one = ds.sel(direction="fwd", amplitude=0.1)
+    for name in ("passband_db", "wall_force_db"):
+        assert float(one[name]) == float(one[f"{name}_linear"]), name
+    for name in ("cutoff_hz", "db20_hz"):
+        got, ref = float(one[name]), float(one[f"{name}_linear"])
+        assert np.searchsorted(f, got) == np.searchsorted(f, ref) and got != ref, name
+    assert float(ds["band_edge_hz"].sel(band_edge="cut-off")) == pytest.approx(math.sqrt(K / m) / math.pi, rel=4 * EPS)
+    assert all(ds[name].attrs["units"] == unit for name, unit in BAND_MEASURES.items())
+    assert ds["mobility_linear"].attrs["units"] == "m/(N s)" and ds["frequency"].attrs["units"] == "Hz"
+    report = spectrum_report(ds)
+    assert "## Band measures" in report and "| cut-off, 3 dB below it [kHz] | fwd |" in report
+    bare = spectrum_dataset(summary, spec.spectrum, None, "no chain here")
+    assert "cutoff_hz_linear" not in bare and "transmissibility_linear" not in bare
+    assert bare.attrs["chain_note"] == "no chain here" and "band_edge_hz" not in bare
+    assert float(bare["cutoff_hz"].sel(direction="fwd", amplitude=0.1)) == float(one["cutoff_hz"])
+    assert "No linearised chain: no chain here." in spectrum_report(bare)
+
+
 # ---------------------------------------------------------------- granel spectrum's band measures (slow)
 
 def spectrum_of(tmp_path, radii, alpha, frequencies, cycles):
