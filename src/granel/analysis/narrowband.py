@@ -368,9 +368,10 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
     cutoff = f_top / float(factors[-1])
     return ChainCutoff(cutoff_hz=cutoff, top_mode_hz=f_top, top_damping_ratio=zeta_top,
                        factor=float(factors[-1]), beads=tuple(labels[g] for g in order),
-                       end_stiffness=(chain.ends[0].stiffness / edges.stiffness, chain.ends[1].stiffness / edges.stiffness),
+                       end_stiffness=tuple(e.stiffness / edges.stiffness for e in chain.ends),
                        modes_hz=modes, window=(float(t_sel[0]), float(t_sel[-1])), strain=strain, spread=spread,
-                       leak=leak, kind=edges.kind, band_edges_hz=tuple(e * cutoff / edges.top_hz for e in edges.edges_hz),
+                       leak=leak, kind=edges.kind,
+                       band_edges_hz=tuple(e * cutoff / edges.top_hz for e in edges.edges_hz),
                        end_shift=_end_shift(ds, chain, f_expected))
 
 
@@ -388,9 +389,9 @@ def _periodic_chain(ds, system):
     edges = band_edges(chain)
     if edges is None:
         k, m = chain.stiffness, chain.mass
-        raise CutoffError(f"the chain {chain.beads[0]}..{chain.beads[-1]} is not monatomic, nor diatomic (bead masses "
-                          f"{m.min():.4g}-{m.max():.4g} kg, pair stiffnesses {k.min():.4g}-{k.max():.4g} N/m; one mass, "
-                          "or two alternating, and one pair stiffness have band edges in closed form)")
+        raise CutoffError(f"the chain {chain.beads[0]}..{chain.beads[-1]} is not monatomic, nor diatomic (bead "
+                          f"masses {m.min():.4g}-{m.max():.4g} kg, pair stiffnesses {k.min():.4g}-{k.max():.4g} N/m; "
+                          "one mass, or two alternating, and one pair stiffness have band edges in closed form)")
     return chain, edges
 
 

@@ -44,9 +44,9 @@ FREQUENCY_FIELD = "excitations.0.frequency"
 AMPLITUDE_FIELD = "excitations.0.amplitude"
 DIRECTIONS = ("fwd", "bwd")
 # each run's measures (`run_measures`) and their units ("1": a ratio; period: in drive periods)
-PER_DIRECTION = {"mobility": "m/(N s)", "transmissibility": "1", "drift": "1", "drive_velocity": "m/s", "measured_velocity": "m/s",
-                 "solid_force": "1", "wall_force": "1", "harmonic2": "1", "harmonic3": "1", "subharmonic2": "1",
-                 "period": "1", "steady": "1", "balance": "1"}
+PER_DIRECTION = {"mobility": "m/(N s)", "transmissibility": "1", "drift": "1", "drive_velocity": "m/s",
+                 "measured_velocity": "m/s", "solid_force": "1", "wall_force": "1", "harmonic2": "1", "harmonic3": "1",
+                 "subharmonic2": "1", "period": "1", "steady": "1", "balance": "1"}
 # the linearised chain's response per direction over frequency (`linear_spectrum`), and units
 LINEAR = {"transmissibility_linear": "1", "mobility_linear": "m/(N s)", "wall_force_linear": "1"}
 # the band measures of a transmissibility curve (`curve_bands`), per amplitude and direction
@@ -321,8 +321,9 @@ def spectrum_chain(run, spec: SpectrumSpec):
         chain.position(label)
         d = measuring_direction(sc, label)
         if 1.0 - abs(float(d @ np.asarray(chain.axis))) > ALONG:
-            raise ChainError(f"granule {label} is driven and measured along ({d[0]:.3g}, {d[1]:.3g}), not along the "
-                             f"chain ({chain.axis[0]:.3g}, {chain.axis[1]:.3g}): its one-dimensional model does not apply")
+            raise ChainError(f"granule {label} is driven and measured along ({d[0]:.3g}, {d[1]:.3g}), not along "
+                             f"the chain ({chain.axis[0]:.3g}, {chain.axis[1]:.3g}): its one-dimensional model does "
+                             "not apply")
     return chain
 
 
@@ -376,7 +377,8 @@ def chain_summary(chain, edges) -> str:
     def end(e):
         if not e.holder:
             return "free"
-        what = "the solid" if e.holder == "solid" else f"wall {e.holder}, " + ("damped" if e.damping > 0 else "undamped")
+        damped = "damped" if e.damping > 0 else "undamped"
+        what = "the solid" if e.holder == "solid" else f"wall {e.holder}, {damped}"
         return f"{what} ({e.stiffness:.4g} N/m)"
 
     kind = f"{edges.kind}, K = {edges.stiffness:.4g} N/m" if edges is not None else "neither monatomic nor diatomic"
@@ -525,7 +527,8 @@ def plot_spectrum(ds: xr.Dataset, output):
     if "band_edge_hz" in sub:
         for ax in (ax_t, ax_m):
             for k, (name, edge) in enumerate(zip(sub["band_edge"].values, sub["band_edge_hz"].values)):
-                ax.axvline(edge / 1e3, color="0.5", lw=0.8, ls="--", label="infinite chain's band edges" if not k else None)
+                ax.axvline(edge / 1e3, color="0.5", lw=0.8, ls="--",
+                           label="infinite chain's band edges" if not k else None)
     route = f"fwd: {ds.attrs.get('drive')} -> {ds.attrs.get('measure')}"
     ax_t.set_ylabel("transmissibility |V_measured| / |V_driven|")
     ax_t.set_title(route, fontsize=9)
