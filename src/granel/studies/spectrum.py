@@ -540,7 +540,7 @@ def plot_spectrum(ds: xr.Dataset, output):
     ax_n.axhline(0.0, color="0.6", lw=0.8)
     ax_n.set_ylabel("nonreciprocity 20 log10(mobility fwd / bwd) [dB]")
     ax_n.set_title("open symbols: a mobility 60 dB below its peak (deep stop band)", fontsize=8)
-    if len(amps) > 1 or amps[0] is not None:
+    if "nonreciprocity_db" in sub and (len(amps) > 1 or amps[0] is not None):
         ax_n.legend(fontsize=7)
     wide = f.max() > 5 * f.min()  # a log frequency axis over wide ranges only
     for ax in (ax_t, ax_m, ax_n, ax_map):
