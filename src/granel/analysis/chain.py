@@ -216,18 +216,30 @@ def linear_chain(ds, system) -> LinearChain:
                        (float(axis[0]), float(axis[1])))
 
 
+def chain_matrices(chain: LinearChain) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K, C, M) of the linearised chain (n x n): each link's spring (dashpot) between its two
+    beads, each end's on its bead alone, and the beads' masses on the diagonal."""
+    n = chain.n
+    idx = np.arange(n - 1)
+
+    def assemble(links, ends):
+        A = np.zeros((n, n))
+        np.add.at(A, (idx, idx), links)
+        np.add.at(A, (idx + 1, idx + 1), links)
+        A[idx, idx + 1] -= links
+        A[idx + 1, idx] -= links
+        A[0, 0] += ends[0]
+        A[-1, -1] += ends[1]
+        return A
+
+    return (assemble(chain.stiffness, [e.stiffness for e in chain.ends]),
+            assemble(chain.damping, [e.damping for e in chain.ends]), np.diag(chain.mass))
+
+
 def dynamic_stiffness(chain: LinearChain, omega: float) -> np.ndarray:
-    """D(w) = K + i w C - w^2 M of the linearised chain (n x n, tridiagonal)."""
-    z = chain.stiffness + 1j * omega * chain.damping  # each link's impedance times i w
-    D = np.diag((-omega * omega * chain.mass).astype(complex))
-    idx = np.arange(chain.n - 1)
-    D[idx, idx] += z
-    D[idx + 1, idx + 1] += z
-    D[idx, idx + 1] -= z
-    D[idx + 1, idx] -= z
-    for end, g in zip(chain.ends, (0, chain.n - 1)):
-        D[g, g] += end.stiffness + 1j * omega * end.damping
-    return D
+    """D(w) = K + i w C - w^2 M of the linearised chain (`chain_matrices`)."""
+    K, C, M = chain_matrices(chain)
+    return K + 1j * omega * C - omega * omega * M
 
 
 @dataclass(frozen=True)

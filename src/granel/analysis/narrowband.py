@@ -19,7 +19,7 @@ from fractions import Fraction
 import numpy as np
 import scipy.linalg
 
-from .chain import ChainError, LinearChain, band_edges, linear_chain
+from .chain import ChainError, LinearChain, band_edges, chain_matrices, linear_chain
 from .signals import damped_modes
 
 
@@ -202,16 +202,8 @@ def _chain_modes(chain: LinearChain, top_hz: float) -> tuple[np.ndarray, np.ndar
     velocities onto the modal velocities as columns), ascending: K phi = w^2 M phi with phi
     M-orthonormal, so q' = phi' M v. (For one mass m these are sqrt(m) times the unit shapes of
     `_chain_matrix`, whose eigenvalues give `chain_mode_factors`.)"""
-    n = chain.n
-    K = np.zeros((n, n))
-    idx = np.arange(n - 1)
-    np.add.at(K, (idx, idx), chain.stiffness)
-    np.add.at(K, (idx + 1, idx + 1), chain.stiffness)
-    K[idx, idx + 1] -= chain.stiffness
-    K[idx + 1, idx] -= chain.stiffness
-    K[0, 0] += chain.ends[0].stiffness
-    K[-1, -1] += chain.ends[1].stiffness
-    lam, phi = scipy.linalg.eigh(K, np.diag(chain.mass))
+    K, _, M = chain_matrices(chain)
+    lam, phi = scipy.linalg.eigh(K, M)
     f = np.sqrt(np.clip(lam, 0.0, None)) / (2 * math.pi)
     return f / top_hz, chain.mass[:, None] * phi
 
