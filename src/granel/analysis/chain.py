@@ -49,6 +49,10 @@ class ChainEnd:
     stiffness: float = 0.0
     damping: float = 0.0
 
+    @property
+    def on_solid(self) -> bool:
+        return "solid" in self.holder.split(" + ")
+
 
 @dataclass(frozen=True)
 class LinearChain:

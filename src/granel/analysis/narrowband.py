@@ -291,12 +291,9 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
     labels = list(system.labels)
     t = np.asarray(ds["time"].values, float)
     output_every = (t[-1] - t[0]) / max(len(t) - 1, 1)
-    # sampling: Gershgorin's bound on the linearised chain's frequencies (row i of M^-1 K: twice
-    # its springs to neighbours, plus its end's spring, over its mass)
-    end = np.zeros(n)
-    end[0], end[-1] = chain.ends[0].stiffness, chain.ends[1].stiffness
-    inner = np.concatenate([[0.0], chain.stiffness]) + np.concatenate([chain.stiffness, [0.0]])
-    f_bound = math.sqrt(float(np.max((2 * inner + end) / chain.mass))) / (2 * math.pi)
+    # sampling: Gershgorin's bound on the linearised chain's frequencies (rows of M^-1 K)
+    K, _, _ = chain_matrices(chain)
+    f_bound = math.sqrt(float(np.max(np.abs(K).sum(axis=1) / chain.mass))) / (2 * math.pi)
     factors, project = _chain_modes(chain, edges.top_hz)
     f_expected = factors[-1] * edges.top_hz  # the top mode, linearised: sizes the record only
     need = SAMPLES_PER_EXPONENTIAL * MODE_ORDER
@@ -341,7 +338,7 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
                 f"a second oscillation of {leak:.2g} of the mode's amplitude beside it (the motion is not the linearised "
                 "chain's modes)")
         kind = str(ds.attrs.get("solid_kind", "rigid"))
-        if kind != "rigid" and any(e.holder == "solid" for e in chain.ends):
+        if kind != "rigid" and any(e.on_solid for e in chain.ends):
             longer = (f"the chain presses on the {kind}, whose motion at the contact couples the chain to the solid's "
                       f"modes: end the chain on a wall or on a rigid solid (solid.kind = \"rigid\"); or {longer}")
         raise CutoffError(f"the fit of the top mode's coordinate finds {what}: {longer}")
@@ -395,7 +392,7 @@ def _end_shift(ds, chain: LinearChain, top_hz: float) -> float:
         return 0.0
     shift = 0.0
     for k, end in enumerate(chain.ends):
-        if "solid" in end.holder:
+        if end.on_solid:
             ends = list(chain.ends)
             ends[k] = replace(end, stiffness=0.0, damping=0.0)
             free = replace(chain, ends=tuple(ends))

@@ -338,7 +338,7 @@ def linear_spectrum(chain, spec: SpectrumSpec, frequencies) -> dict[str, np.ndar
     for r, (_, driven, measured) in enumerate(runs):
         a, b = chain.position(driven), chain.position(measured)
         end = {0: 0, chain.n - 1: 1}.get(b)
-        walled = end is not None and chain.ends[end].holder not in ("", "solid")
+        walled = end is not None and chain.ends[end].holder != "" and not chain.ends[end].on_solid
         for k, f in enumerate(frequencies):
             resp = chain_response(chain, float(f), driven)
             out["transmissibility_linear"][r, k] = abs(resp.velocity[b] / resp.velocity[a])
