@@ -402,14 +402,11 @@ def add_bands(out: xr.Dataset, spec: SpectrumSpec, chain=None, note: str = "") -
     diatomic = edges is not None and edges.kind == "diatomic"
     dirs = list(out["direction"].values)
     amps = list(sub["amplitude"].values) if "amplitude" in sub.dims else [None]
+    measured = [[curve_bands(f[order], one["transmissibility"].sel(direction=d).values[order],
+                             one["wall_force"].sel(direction=d).values[order], diatomic=diatomic) for d in dirs]
+                for one in (sub.sel(amplitude=a) if a is not None else sub for a in amps)]
     for name, unit in BAND_MEASURES.items():
-        vals = np.full((len(amps), len(dirs)), np.nan)
-        for i, a in enumerate(amps):
-            one = sub.sel(amplitude=a) if a is not None else sub
-            for j, d in enumerate(dirs):
-                got = curve_bands(f[order], one["transmissibility"].sel(direction=d).values[order],
-                                  one["wall_force"].sel(direction=d).values[order], diatomic=diatomic)
-                vals[i, j] = got[name]
+        vals = np.array([[m[name] for m in row] for row in measured])
         dims = ("amplitude", "direction") if amps[0] is not None else ("direction",)
         out[name] = (dims, vals if amps[0] is not None else vals[0], {"units": unit})
     if chain is None:
