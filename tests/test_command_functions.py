@@ -147,7 +147,7 @@ def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude
 
 
 def _written(calls):
-    def write(summary, spectrum, path):
+    def write(summary, spectrum, path, *chain):  # chain: the runs' linearised chain and why there is none
         calls.append(("write", summary, path))
         raise PermissionError(13, "denied")
 

@@ -97,29 +97,66 @@ def test_sphere_sphere_impact(v):
         assert within_truncation(got, finer, want, 2.5 * rounding)
 
 
-def _sphere_wall(v, per):
+def _sphere_wall(v, per, alpha_n=0.0, damped=True):
+    """A 5 mm steel sphere thrown at v along a wall's normal under a contact law of Tsuji damping
+    alpha_n (no friction), the wall damped or not: (peak overlap, contact duration, rebound
+    speed, Hertz's delta_max and t_c, the positions' rounding share, the viscous work)."""
     R = 0.005
-    wall = Wall((0.01, -0.02), (0.01, 0.02), (-1.0, 0.0), "", "w")
-    system = make_system([("a", 0.01 - R - 1e-6, 0.0, R)], walls=[wall])
+    wall = Wall((0.01, -0.02), (0.01, 0.02), (-1.0, 0.0), "", "w", damped=damped)
+    system = make_system([("a", 0.01 - R - 1e-6, 0.0, R)], law=ContactLaw(0.0, alpha_n, 100.0), walls=[wall])
     state = initial_state(system, velocities=[[v, 0.0]])
-    Es = STEEL.E / (1 - STEEL.nu**2)  # rigid wall: E* = E/(1-nu^2), R* = R, m* = m
+    Es = STEEL.E / (1 - STEEL.nu**2)  # rigid wall: E* = E/(1-nu^2), R* = R, and the impact's m* = m
     dmax, tc = analytic(system.mass[0], Es, R, v)
     dt = tc / per
     over = lambda s: R - (0.01 - s.pos[0, 0])  # noqa: E731
     peak, dur = track_overlap(system, state, over, dt, 3 * per + int(1e-6 / v / dt))
     steps = round(state.t / dt)
-    return peak, dur, -state.vel[0, 0], dmax, tc, steps * np.spacing(0.01) / dmax
+    return peak, dur, -state.vel[0, 0], dmax, tc, steps * np.spacing(0.01) / dmax, state.dissipated_viscous
 
 
 @pytest.mark.parametrize("v", [0.1, 1.0, 2.5])
 def test_sphere_wall_impact(v):
     """As the sphere-sphere impact (`within_truncation` at t_c / 2000 against t_c / 4000, and
     an ulp of x = 1 cm a step against the overlap); the elastic rebound restores the speed."""
-    peak, dur, back, dmax, tc, rounding = _sphere_wall(v, 2000)
-    peak2, dur2, back2, _, _, _ = _sphere_wall(v, 4000)
+    peak, dur, back, dmax, tc, rounding, _ = _sphere_wall(v, 2000)
+    peak2, dur2, back2, _, _, _, _ = _sphere_wall(v, 4000)
     assert within_truncation(peak, peak2, dmax, rounding)
     assert within_truncation(dur, dur2, tc, rounding)
     assert within_truncation(back, back2, v, 2.5 * rounding)
+
+
+@pytest.mark.parametrize("v", [0.1, 2.5])
+def test_an_undamped_wall_is_elastic(v):
+    """An undamped wall (`Wall.damped = False`) under a strongly damped contact law (alpha_n =
+    0.5): its contact is Hertz's alone, so the impact is Hertz's closed form (rigid flat: E* =
+    E / (1 - nu^2), R* = R, m* = m): peak overlap delta_max, duration t_c = 2.943 delta_max / v
+    (= 2.943 (15 m / (16 E* sqrt(R)))^(2/5) v^(-1/5)) and a restitution of 1, each within RK4's
+    truncation at t_c / 2000 (estimated at t_c / 4000, `within_truncation`) and the positions'
+    rounding; no viscous work at all (G = 0 exactly). Measured: 2e-10 to 1e-9 off."""
+    peak, dur, back, dmax, tc, rounding, viscous = _sphere_wall(v, 2000, alpha_n=0.5, damped=False)
+    peak2, dur2, back2, _, _, _, _ = _sphere_wall(v, 4000, alpha_n=0.5, damped=False)
+    print(f"v = {v}: delta_max {peak / dmax - 1:.1e}, t_c {dur / tc - 1:.1e}, restitution {back / v - 1:.1e} off")
+    assert within_truncation(peak, peak2, dmax, rounding)
+    assert within_truncation(dur, dur2, tc, rounding)
+    assert within_truncation(back, back2, v, 2.5 * rounding)
+    assert viscous == 0.0
+
+
+def test_a_damped_wall_is_not():
+    """The wall of `test_an_undamped_wall_is_elastic` damped (the default): the Tsuji law's
+    restitution depends on alpha_n alone, not on the speed (Tsuji, Tanaka & Ishida 1992: the
+    dashpot gamma ~ delta^(1/4) keeps the impact self-similar), so it is the same at 0.1 and
+    2.5 m/s within their truncations (estimated at half the step) and rounding, and far from 1
+    at alpha_n = 0.5 (measured 0.48640 and 0.48639)."""
+    e = {}
+    for speed in (0.1, 2.5):
+        _, _, back, _, _, rounding, viscous = _sphere_wall(speed, 2000, alpha_n=0.5)
+        _, _, back2, _, _, _, _ = _sphere_wall(speed, 4000, alpha_n=0.5)
+        e[speed] = (back / speed, 2 * abs(back - back2) / speed + 2.5 * rounding)
+        assert viscous > 0.0
+    print(f"damped wall: restitution {e}")
+    assert e[0.1][0] == pytest.approx(e[2.5][0], abs=e[0.1][1] + e[2.5][1])
+    assert e[0.1][0] < 0.9
 
 
 def test_new_contacts_are_detected():

@@ -120,9 +120,9 @@ def test_each_mode_declares_its_metrics_with_units():
     assert len(rec) == 19 and rec["nonreciprocity_index"] == "1" and rec["arrival_bwd_s"] == "s"
     assert {"peak_contact_force_fwd_N", "peak_contact_force_bwd_N", "peak_wall_force_fwd_N", "peak_wall_force_bwd_N"} < set(rec)
     both = study_mode("spectrum").metric_units(spectrum_spec(True))
-    assert len(both) == 2 * 11 + 1 + 2 + 4 and both["mobility_bwd"] == "m/(N s)" and both["nonreciprocity_db"] == "dB"
+    assert len(both) == 2 * 13 + 1 + 2 + 4 and both["mobility_bwd"] == "m/(N s)" and both["nonreciprocity_db"] == "dB"
     one = study_mode("spectrum").metric_units(spectrum_spec(False))
-    assert len(one) == 11 + 2 + 2 and "peak_wall_force_N" in one and "nonreciprocity_db" not in one
+    assert len(one) == 13 + 2 + 2 and "peak_wall_force_N" in one and "nonreciprocity_db" not in one
 
 
 @pytest.mark.parametrize("make", [reciprocity_spec, lambda: spectrum_spec(True, (22000.0,))], ids=["reciprocity", "spectrum"])
@@ -130,7 +130,7 @@ def test_a_case_reports_exactly_the_declared_metrics(tmp_path, make):
     spec = make()
     r = run_case(spec.model_dump_json(), ".", cases(spec)[0], str(tmp_path), keep_runs=False)
     assert r["status"] == "ok", r
-    assert set(r["metrics"]) == set(study_mode(spec.mode).metric_units(spec)) and len(r["metrics"]) in (19, 29)
+    assert set(r["metrics"]) == set(study_mode(spec.mode).metric_units(spec)) and len(r["metrics"]) in (19, 33)
     assert all(math.isfinite(v) for k, v in r["metrics"].items() if k.startswith("peak_") or k.startswith("mobility"))
 
 

@@ -749,7 +749,7 @@ def spectrum(
                                 scheduler, scenario, f"-o {out}: cannot write the spectrum's runs in {work}")
     except NotWritten as e:
         _fail(f"-o {out}: cannot write the spectrum ({e.cause})", 4)
-    console.print(spectrum_report(ds))
+    console.print(spectrum_report(ds), markup=False)  # its [kHz], [dB] are units, not markup
     console.print(f"wrote {out}, {out.with_suffix('.png')}, {out.with_suffix('.md')} (runs in {work})")
     for r in failed:
         console.print(f"[yellow]{r['tag']}[/]: {r['status']}")

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
+import scipy.linalg
 
+from .chain import ChainError, LinearChain, band_edges, chain_matrices, linear_chain
 from .signals import damped_modes
 
 
@@ -133,19 +135,24 @@ class CutoffError(ValueError):
 
 @dataclass(frozen=True)
 class ChainCutoff:
-    """A precompressed monatomic chain's cut-off measured from a run (`cutoff_frequency`)."""
+    """A precompressed chain's band edges measured from a run (`cutoff_frequency`): for a
+    monatomic chain its cut-off; for a diatomic one (two masses alternating) its acoustic band's
+    top, its optical band's bottom and top, the last being `cutoff_hz`."""
 
-    cutoff_hz: float  # f_c = f_top / factor
+    cutoff_hz: float  # the highest frequency that propagates: f_top / factor
     top_mode_hz: float  # the highest mode's undamped frequency, measured
     top_damping_ratio: float  # its damping ratio, measured
-    factor: float  # f_top / f_c of the linearised chain with these ends (`chain_mode_factors`)
+    factor: float  # f_top / cutoff of the linearised chain with these ends
     beads: tuple[str, ...]  # the chain's beads, end to end
-    end_stiffness: tuple[float, float]  # each end's wall stiffness over the pair stiffness (0: free)
+    end_stiffness: tuple[float, float]  # each end's wall (or solid) stiffness over the pair stiffness (0: free)
     modes_hz: np.ndarray  # each mode's undamped frequency, measured in its modal coordinate (NaN: not excited)
     window: tuple[float, float]  # the free response analysed [s]
     strain: float  # the largest |delta - delta0| / delta0 of a pair over the record
     spread: float  # |f_top from the window's first 3/4 / f_top - 1|: the fit's own check
     leak: float  # the top mode's coordinate: its second strongest oscillation over the mode's
+    kind: str = "monatomic"  # or "diatomic"
+    band_edges_hz: tuple[float, ...] = ()  # (cut-off,) or (acoustic top, optical bottom, optical top), measured
+    end_shift: float = 0.0  # an end on an elastic solid: |factor with that end free / factor - 1|, else 0
 
 
 def _chain_matrix(n: int, k_first: float, k_last: float) -> np.ndarray:
@@ -171,61 +178,6 @@ def chain_mode_factors(n: int, k_first: float = 0.0, k_last: float = 0.0) -> np.
     return np.sqrt(np.clip(np.linalg.eigvalsh(_chain_matrix(n, k_first, k_last)), 0.0, None) / 4.0)
 
 
-def _chain_contacts(ds, system):
-    """The precompressed chain of a run from its equilibrium contacts: (beads in order, pair
-    stiffness per link, {bead: wall stiffness}); CutoffError when they are not one chain."""
-    labels = [str(g) for g in ds["granule"].values]
-    if labels != list(system.labels):
-        raise CutoffError("the granular system given is not the run's (its granules differ)")
-    index = {lab: k for k, lab in enumerate(labels)}
-    walls = {str(w) for w in ds["wall"].values} if "wall" in ds else set()
-    names = [str(c) for c in ds["equilibrium_contact"].values]
-    force = np.asarray(ds["equilibrium_force"].values, float)
-    overlap = np.asarray(ds["equilibrium_overlap"].values, float)
-    pairs: dict[tuple[int, int], float] = {}
-    on_wall: dict[int, float] = {}
-    for name, F, d in zip(names, force, overlap):
-        if not (F > 0 and d > 0):
-            continue
-        K = 1.5 * F / d  # Hertz F = A d^(3/2): dF/dd = 3/2 F / d
-        split = [p for p, ch in enumerate(name) if ch == "|" and name[:p] in index and name[p + 1:] in walls]
-        if split:
-            g = index[name[:split[0]]]
-            on_wall[g] = on_wall.get(g, 0.0) + K
-            continue
-        split = [p for p, ch in enumerate(name) if ch == "-" and name[:p] in index and name[p + 1:] in index]
-        if not split:
-            raise CutoffError(f"equilibrium contact {name!r} is neither a pair nor a wall contact")
-        i, j = index[name[:split[0]]], index[name[split[0] + 1:]]
-        pairs[(min(i, j), max(i, j))] = K
-    if not pairs:
-        raise CutoffError("no pair of granules is pressed at equilibrium: there is no precompressed chain")
-    nbrs: dict[int, list[int]] = {}
-    for i, j in pairs:
-        nbrs.setdefault(i, []).append(j)
-        nbrs.setdefault(j, []).append(i)
-    crowded = [g for g, ns in nbrs.items() if len(ns) > 2]
-    if crowded:
-        raise CutoffError(f"granule {labels[crowded[0]]} is pressed by {len(nbrs[crowded[0]])} neighbours: the loaded "
-                          "contacts form a packing, not a chain")
-    ends = [g for g, ns in nbrs.items() if len(ns) == 1]
-    if len(ends) != 2:
-        raise CutoffError("the loaded contacts close a loop: not a chain")
-    order = [min(ends, key=lambda g: labels[g])]
-    while len(order) < len(nbrs):
-        nxt = [g for g in nbrs[order[-1]] if g not in order[-2:]]
-        if not nxt:
-            break
-        order.append(nxt[0])
-    if len(order) != len(nbrs) or len(pairs) != len(order) - 1:
-        raise CutoffError("the loaded contacts form several chains; a cut-off needs one")
-    stray = [g for g in on_wall if g not in (order[0], order[-1])]
-    if stray:
-        raise CutoffError(f"granule {labels[stray[0]]} presses on a wall away from the chain's ends")
-    links = np.array([pairs[(min(a, b), max(a, b))] for a, b in zip(order[:-1], order[1:])])
-    return order, links, on_wall
-
-
 # The fit of a chain's free response. Outputs are thinned to about SAMPLES_PER_PERIOD samples a
 # period of the chain's highest possible frequency (Gershgorin's bound); each modal coordinate
 # is fitted with MODE_ORDER exponentials (its mode, and room for the weak oscillations that leak
@@ -245,12 +197,15 @@ MAX_LEAK = 0.1  # a coordinate whose second oscillation reaches this share of it
 MIN_SHARE = 1e-6  # the top mode's coordinate below this share (RMS) of the strongest one: not excited
 
 
-def _chain_modes(n: int, k_first: float, k_last: float) -> tuple[np.ndarray, np.ndarray]:
-    """(factors as `chain_mode_factors`, unit mode shapes as columns), ascending."""
-    if n == 1:
-        return chain_mode_factors(1, k_first, k_last), np.ones((1, 1))
-    lam, shapes = np.linalg.eigh(_chain_matrix(n, k_first, k_last))
-    return np.sqrt(np.clip(lam, 0.0, None) / 4.0), shapes
+def _chain_modes(chain: LinearChain, top_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(each undamped mode's frequency over `top_hz`, the projections from the beads'
+    velocities onto the modal velocities as columns), ascending: K phi = w^2 M phi with phi
+    M-orthonormal, so q' = phi' M v. (For one mass m these are sqrt(m) times the unit shapes of
+    `_chain_matrix`, whose eigenvalues give `chain_mode_factors`.)"""
+    K, _, M = chain_matrices(chain)
+    lam, phi = scipy.linalg.eigh(K, M)
+    f = np.sqrt(np.clip(lam, 0.0, None)) / (2 * math.pi)
+    return f / top_hz, chain.mass[:, None] * phi
 
 
 def _mode_of(t, q) -> tuple[float, float, float] | None:
@@ -313,31 +268,34 @@ def _duration_for(t_first: float, span: float, output_every: float) -> float:
 
 def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 0.1,
                      rtol: float = 1e-3) -> ChainCutoff:
-    """The cut-off f_c = (1/pi) sqrt(K / m) of a precompressed monatomic chain, measured from a
-    run in which a transient load sets it ringing: the frequency of the chain's highest normal
-    mode in the free response (`damped_modes` on its modal coordinate) over that mode's factor
-    for the chain's ends (`chain_mode_factors`).
+    """The band edges of a precompressed monatomic or diatomic chain, measured from a run in which
+    a transient load sets it ringing: the frequency of the chain's highest normal mode in the
+    free response (`damped_modes` on its modal coordinate) over that mode's share of the
+    infinite chain's top band edge, for the chain's masses and ends (`_chain_modes`): the
+    cut-off f_c = (1/pi) sqrt(K / m) of a monatomic chain; the optical band's top
+    sqrt(2 K (1/m1 + 1/m2)) / 2 pi of a diatomic one, whose other edges (`analysis.chain.band_edges`)
+    scale with it (every edge goes as sqrt(K), the one stiffness measured).
 
+    The chain's ends may press on rigid walls or on the solid: each is an end spring of its
+    contact's Hertz stiffness (the solid's contact point taken as immovable: exact for a rigid
+    solid; for a plate or beam `end_shift` says how much a free end would move the answer).
     The free response must hold `min_periods` periods of the top mode, no contact's overlap may
     swing by more than `max_strain` of its static value, and the top mode may move by at most
     `rtol` when the last quarter of the record is left out. CutoffError (a ValueError) says why
     a run cannot give a cut-off and which field to change. `system` is the run's granular
     system (`analysis.result_model.result_system(ds)`). docs/design.md ("An inverse problem: a
     chain's cut-off") gives the method, its checks and its bias."""
-    if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
-        raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
-                          "a cut-off belongs to a precompressed chain")
-    if float(ds.attrs.get("equilibrium_max_solid_force_N", 0.0)) > 0:
-        raise CutoffError("the chain presses on the solid: only rigid walls may hold a chain whose cut-off is measured")
-    order, m, K, k_ends, axis = _monatomic_chain(ds, system)
-    n = len(order)
+    chain, edges = _periodic_chain(ds, system)
+    order, axis = list(chain.index), np.array(chain.axis)
+    n = chain.n
     labels = list(system.labels)
     t = np.asarray(ds["time"].values, float)
     output_every = (t[-1] - t[0]) / max(len(t) - 1, 1)
-    # sampling: Gershgorin's bound on the linearised chain's frequencies
-    f_bound = math.sqrt(max(4.0, 2.0 + k_ends[0], 2.0 + k_ends[1]) * K / m) / (2 * math.pi)
-    factors, shapes = _chain_modes(n, *k_ends)
-    f_expected = factors[-1] * math.sqrt(K / m) / math.pi  # the top mode, linearised: sizes the record only
+    # sampling: Gershgorin's bound on the linearised chain's frequencies (rows of M^-1 K)
+    K, _, _ = chain_matrices(chain)
+    f_bound = math.sqrt(float(np.max(np.abs(K).sum(axis=1) / chain.mass))) / (2 * math.pi)
+    factors, project = _chain_modes(chain, edges.top_hz)
+    f_expected = factors[-1] * edges.top_hz  # the top mode, linearised: sizes the record only
     need = SAMPLES_PER_EXPONENTIAL * MODE_ORDER
     # the samples fitted: MAX_SAMPLES, or more when min_periods of the top mode need more
     def budget(h):
@@ -352,7 +310,7 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
                           f"{f_expected:.4g} Hz): raise simulation.duration to at least {enough:.10g} s")
     if not np.any(V):
         raise CutoffError(f"the chain does not move after its loads end: nothing to measure (raise {_load_fields(system)})")
-    Q = V @ shapes  # the modal coordinates
+    Q = V @ project  # the modal coordinates' velocities
     rms = np.sqrt(np.mean(Q * Q, axis=0))
     if not rms[-1] > MIN_SHARE * rms.max():
         raise CutoffError(f"the top mode is not excited (its coordinate holds {rms[-1] / rms.max():.2g} of the strongest "
@@ -379,6 +337,10 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
                 if f_top > f_bound * (1.0 + 1e-3) else
                 f"a second oscillation of {leak:.2g} of the mode's amplitude beside it (the motion is not the linearised "
                 "chain's modes)")
+        kind = str(ds.attrs.get("solid_kind", "rigid"))
+        if kind != "rigid" and any(e.on_solid for e in chain.ends):
+            longer = (f"the chain presses on the {kind}, whose motion at the contact couples the chain to the solid's "
+                      f"modes: end the chain on a wall or on a rigid solid (solid.kind = \"rigid\"); or {longer}")
         raise CutoffError(f"the fit of the top mode's coordinate finds {what}: {longer}")
     if span * f_top < min_periods:
         raise CutoffError(f"the free response ({span:.3g} s) holds {span * f_top:.1f} periods of the top mode "
@@ -392,32 +354,50 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
         raise CutoffError(f"the top mode ({f_top:.6g} Hz) moves by {spread:.2g} when the last quarter of the free response "
                           f"is left out (limit {rtol:g}): {longer}")
     modes = np.array([f[0] if f is not None else math.nan for f in fits])
-    return ChainCutoff(cutoff_hz=f_top / float(factors[-1]), top_mode_hz=f_top, top_damping_ratio=zeta_top,
-                       factor=float(factors[-1]), beads=tuple(labels[g] for g in order), end_stiffness=k_ends,
+    cutoff = f_top / float(factors[-1])
+    return ChainCutoff(cutoff_hz=cutoff, top_mode_hz=f_top, top_damping_ratio=zeta_top,
+                       factor=float(factors[-1]), beads=tuple(labels[g] for g in order),
+                       end_stiffness=tuple(e.stiffness / edges.stiffness for e in chain.ends),
                        modes_hz=modes, window=(float(t_sel[0]), float(t_sel[-1])), strain=strain, spread=spread,
-                       leak=leak)
+                       leak=leak, kind=edges.kind,
+                       band_edges_hz=tuple(e * cutoff / edges.top_hz for e in edges.edges_hz),
+                       end_shift=_end_shift(ds, chain, f_expected))
 
 
-def _monatomic_chain(ds, system):
-    """(order, bead mass, pair stiffness, end stiffnesses over it, the chain's unit axis) of the
-    run's precompressed chain, or CutoffError if it is not one straight monatomic chain."""
-    order, links, on_wall = _chain_contacts(ds, system)
-    labels = list(system.labels)
-    mass = system.mass[order]
-    if np.ptp(mass) > 1e-9 * mass.max() or np.ptp(links) > 1e-6 * links.max():
-        raise CutoffError(f"the chain {labels[order[0]]}..{labels[order[-1]]} is not monatomic (bead masses "
-                          f"{mass.min():.4g}-{mass.max():.4g} kg, pair stiffnesses {links.min():.4g}-{links.max():.4g} "
-                          "N/m): its band edge is not a single f_c")
-    m, K = float(mass.mean()), float(links.mean())
-    k_ends = (float(on_wall.get(order[0], 0.0) / K), float(on_wall.get(order[-1], 0.0) / K))
-    x0 = np.column_stack([ds["x"].values[0, order], ds["y"].values[0, order]])
-    axis = x0[-1] - x0[0]
-    axis /= np.hypot(*axis)
-    off = np.abs((x0 - x0[0]) @ np.array([-axis[1], axis[0]]))
-    if off.max() > 1e-3 * system.radius[order].min():
-        raise CutoffError(f"the chain is not straight ({labels[order[int(np.argmax(off))]]} lies {off.max():.3g} m off "
-                          "the line through its ends): the one-dimensional band does not apply")
-    return order, m, K, k_ends, axis
+def _periodic_chain(ds, system):
+    """(the run's chain linearised, `analysis.chain.linear_chain`; its infinite chain's band
+    edges), or CutoffError: no static precompression, not one straight chain, or a chain that
+    is neither monatomic nor diatomic."""
+    if "equilibrium_contact" not in ds or not ds.sizes.get("equilibrium_contact", 0):
+        raise CutoffError("the run has no static precompression (simulation.equilibrate = true with a constant load): "
+                          "a cut-off belongs to a precompressed chain")
+    try:
+        chain = linear_chain(ds, system)
+    except ChainError as e:
+        raise CutoffError(str(e)) from None
+    edges = band_edges(chain)
+    if edges is None:
+        k, m = chain.stiffness, chain.mass
+        raise CutoffError(f"the chain {chain.beads[0]}..{chain.beads[-1]} is not monatomic, nor diatomic (bead "
+                          f"masses {m.min():.4g}-{m.max():.4g} kg, pair stiffnesses {k.min():.4g}-{k.max():.4g} N/m; "
+                          "one mass, or two alternating, and one pair stiffness have band edges in closed form)")
+    return chain, edges
+
+
+def _end_shift(ds, chain: LinearChain, top_hz: float) -> float:
+    """For ends held by an elastic solid: the largest |the linearised top mode with that end free
+    / `top_hz` (with it held) - 1|, a scale of how far the solid's own motion, neglected, could
+    move the cut-off; 0 when no end presses on an elastic solid."""
+    if str(ds.attrs.get("solid_kind", "rigid")) == "rigid":
+        return 0.0
+    shift = 0.0
+    for k, end in enumerate(chain.ends):
+        if end.on_solid:
+            ends = list(chain.ends)
+            ends[k] = replace(end, stiffness=0.0, damping=0.0)
+            free = replace(chain, ends=tuple(ends))
+            shift = max(shift, abs(_chain_modes(free, top_hz)[0][-1] - 1.0))
+    return shift
 
 
 def _free_response(ds, system, order, axis, f_bound: float, max_strain: float, budget):

@@ -27,7 +27,7 @@ def result_system(ds, name="result") -> GranularSystem:
         raise ResultFileError(f"{name}: damaged result (its model record: a load of unknown kind)", 2)
     loads = [Excitation(e.granule, e.direction, LoadHistory(e.kind, e.params, np.array(e.times), np.array(e.values)))
              for e in rec.loads]
-    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, WallDrive(*w.drive) if w.drive[1] != 0 else None)
+    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, WallDrive(*w.drive) if w.drive[1] != 0 else None, w.damped)
              for w in rec.walls]
     contacts = [SolidContact(c.granule, c.position, c.normal, c.name) for c in rec.contacts]
     return GranularSystem(list(rec.labels), rec.medium_index, list(rec.media), rec.position0, rec.radius, rec.mass,

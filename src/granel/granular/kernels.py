@@ -5,7 +5,7 @@ stiff), per-granule energies (11), and the interface forces with their Jacobian.
 Kernel inputs travel in the bundles of `granular.bundles` (state layout documented there).
 Three kinds of contact share one geometry helper each and one force routine:
   pairs   granule-granule candidates from the neighbour list (Hertz + Tsuji damping + friction);
-  walls   granule-rigid wall candidates (m* = m: damped);
+  walls   granule-rigid wall candidates (m* = m: damped; G = 0 at an undamped wall);
   points  granule-solid contact points moving with the solid, u(tau) from `Motion` (eq. A3);
           m* = 0 there, so no viscous damping.
 """

@@ -86,11 +86,13 @@ def pair_coefficients(E1, nu1, R1, m1, E2, nu2, R2, m2, alpha_n):
     return A, damping_coefficient(alpha_n, effective_mass(m1, m2), A)
 
 
-def wall_coefficients(E, nu, R, m, alpha_n):
+def wall_coefficients(E, nu, R, m, alpha_n, damped=True):
     """(A, G) of eq. (3) for a granule on a rigid, immovable wall: E* = E / (1 - nu^2), R* = R,
-    m* = m."""
+    and in the dashpot m* = m for a damped wall, m* = 0 (G = 0, Hertz alone) for an undamped
+    (elastic) one; `damped` is a bool or an array of them, one per granule."""
     A = hertz_coefficient(effective_modulus(E, nu), effective_radius(R))
-    return A, damping_coefficient(alpha_n, effective_mass(m, None), A)
+    m_star = effective_mass(m, None) if np.all(damped) else np.where(damped, effective_mass(m, None), 0.0)
+    return A, damping_coefficient(alpha_n, m_star, A)
 
 
 def point_coefficient(E, nu, R):

@@ -22,7 +22,9 @@ from .neighbours import close_pairs
 
 @dataclass(frozen=True)
 class Wall:
-    """A rigid flat wall segment from p0 to p1; `normal` points into the granular side."""
+    """A rigid flat wall segment from p0 to p1; `normal` points into the granular side. A damped
+    wall's contacts carry the Tsuji dashpot of eq. (3) with m* = m; an undamped (elastic) one's
+    are Hertz's alone (`materials.wall_coefficients`)."""
 
     p0: tuple[float, float]
     p1: tuple[float, float]
@@ -30,6 +32,7 @@ class Wall:
     medium: str = ""  # "" = touches granules of every medium
     name: str = ""
     drive: WallDrive | None = None  # a shaker: the wall moves along its normal (excitation.WallDrive)
+    damped: bool = True  # False: no dashpot at its contacts (an elastic wall)
 
 
 @dataclass

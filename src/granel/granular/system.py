@@ -258,7 +258,8 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         wg += idx.tolist()
         ww += [k] * len(idx)
     wg = np.array(wg, dtype=np.int64)
-    wA, wG = wall_coefficients(E[wg], nu[wg], R[wg], m[wg], law.alpha_n)
+    damped = np.array([w.damped for w in system.walls], bool)[np.array(ww, dtype=np.int64)]
+    wA, wG = wall_coefficients(E[wg], nu[wg], R[wg], m[wg], law.alpha_n, damped)
     walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm, drive)
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 

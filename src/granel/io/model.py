@@ -22,12 +22,15 @@ from .results import RECORD_DIMS, ResultFileError, wall_names
 RECORD_VERSION = 1  # the `model_record` attribute: raise when the record's layout changes
 DRIVE_PARAMS = 6  # `granular.loads.WallDrive.params`: amplitude, frequency, t0, duration, phase, ramp cycles
 LOAD_PARAMS = 8  # `granular.laws.LOAD_PARAMS`: a load history's parameters, zero-padded
+# record variables a result of an earlier granel may lack, read with their default (walls damped)
+OPTIONAL = ("wall_damped",)
 
 
 @dataclass(frozen=True)
 class WallRecord:
     """A rigid wall: its label in the result, ends p0 -> p1, unit normal into the granules, the
-    medium it holds ("" for every medium) and, for a shaker, `WallDrive.params` (zeros at rest)."""
+    medium it holds ("" for every medium), for a shaker `WallDrive.params` (zeros at rest), and
+    whether its contacts are damped (a result without `wall_damped` predates undamped walls)."""
 
     name: str
     p0: tuple[float, float]
@@ -35,6 +38,7 @@ class WallRecord:
     normal: tuple[float, float]
     medium: str
     drive: tuple[float, ...]
+    damped: bool = True
 
 
 @dataclass(frozen=True)
@@ -104,7 +108,8 @@ def model_record(system, solid) -> ResultModel:
     if [c.name for c in system.solid_contacts] != [c.name for c in solid.contacts]:
         raise ValueError("the granular system's solid contacts and the solid's contact points differ")
     walls = tuple(WallRecord(label, _pair(w.p0), _pair(w.p1), _pair(w.normal), w.medium,
-                             tuple(float(x) for x in w.drive.params()) if w.drive is not None else (0.0,) * DRIVE_PARAMS)
+                             tuple(float(x) for x in w.drive.params()) if w.drive is not None
+                             else (0.0,) * DRIVE_PARAMS, bool(w.damped))
                   for label, w in zip(wall_names(system), system.walls))
     contacts = tuple(ContactRecord(p.name, int(c.granule), _pair(c.point), _pair(c.normal), (p.dof_x, p.dof_y, p.dof_rotation))
                      for c, p in zip(system.solid_contacts, solid.contacts))
@@ -147,6 +152,8 @@ def record_entries(rec: ResultModel) -> tuple[dict, dict]:
                         {"long_name": "the medium it holds (empty: every medium)"}),
         "wall_drive": (np.array([w.drive for w in rec.walls], float).reshape(nw, DRIVE_PARAMS),
                        {"long_name": "shaker motion: amplitude, frequency, t0, duration, phase, ramp cycles (zeros: at rest)"}),
+        "wall_damped": (np.array([w.damped for w in rec.walls], np.int8),
+                        {"long_name": "1: its contacts have the dashpot of eq. (3) (m* = m); 0: Hertz alone"}),
         "contact_granule": (np.array([c.granule for c in rec.contacts], np.int64), {}),
         "contact_position": (np.array([c.position for c in rec.contacts], float).reshape(nc, 2),
                              {"units": "m", "long_name": "rest position on the solid"}),
@@ -203,7 +210,8 @@ def read_record(ds, name="result") -> ResultModel:
     if str(attrs["model_record"]) != str(RECORD_VERSION):
         raise bad(f"version {attrs['model_record']}, this granel reads {RECORD_VERSION}")
     mesh = ("solid_node_position", "solid_element_nodes")  # a rigid solid has none
-    missing = [v for v in RECORD_DIMS if v not in ds.variables and (v not in mesh or any(m in ds.variables for m in mesh))]
+    missing = [v for v in RECORD_DIMS if v not in ds.variables and v not in OPTIONAL
+               and (v not in mesh or any(m in ds.variables for m in mesh))]
     if missing:
         raise bad(f"no {', '.join(missing)}")
     for v in RECORD_DIMS:
@@ -236,9 +244,13 @@ def read_record(ds, name="result") -> ResultModel:
     if np.any((granule < 0) | (granule >= n)) or np.any((cdofs < -1) | (cdofs >= dofs)):
         raise bad("a contact's granule or DOF is out of range")
     f = lambda v: np.asarray(ds[v].values, float)  # noqa: E731
-    walls = tuple(WallRecord(str(lab), tuple(p0), tuple(p1), tuple(nrm), str(m), tuple(float(x) for x in d))
-                  for lab, p0, p1, nrm, m, d in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"), f("wall_normal"),
-                                                    ds["wall_medium"].values, f("wall_drive")))
+    damped = np.asarray(ds["wall_damped"].values) if "wall_damped" in ds.variables else np.ones(counts["wall"], np.int8)
+    if not np.isin(damped, (0, 1)).all():
+        raise bad("wall_damped is neither 0 nor 1")
+    walls = tuple(WallRecord(str(lab), tuple(p0), tuple(p1), tuple(nrm), str(m), tuple(float(x) for x in d), bool(dmp))
+                  for lab, p0, p1, nrm, m, d, dmp in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"),
+                                                         f("wall_normal"), ds["wall_medium"].values, f("wall_drive"),
+                                                         damped))
     contacts = tuple(ContactRecord(str(lab), int(g), tuple(p), tuple(nrm), tuple(int(x) for x in d))
                      for lab, g, p, nrm, d in zip(ds["contact"].values, granule, f("contact_position"), f("contact_normal"),
                                                   cdofs))

@@ -65,6 +65,9 @@ def build_media(sc: Scenario, base: Path | None = None):
                                         m.wall_names(), m.gap, m.grow)
             except ValueError as e:
                 raise ScenarioError(f"media.{k}: {e}") from None
+        if m.undamped_walls:
+            med.walls = [replace(w, damped=False) if w.name.split(":", 1)[1] in m.undamped_walls else w
+                         for w in med.walls]
         media.append(med)
     return media
 
@@ -129,7 +132,8 @@ def build_granular(sc: Scenario, base: Path | None = None):
         except (OSError, ValueError) as err:
             raise ScenarioError(f"excitations.{k}.file = {e.file!r}: {err}") from None
         exc.append(Excitation(labels.index(e.granule), excitation_direction(e, side_of[e.granule]), hist))
-    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, w.motion.drive() if w.motion is not None else None) for w in sc.walls]
+    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, w.motion.drive() if w.motion is not None else None, w.damped)
+             for w in sc.walls]
     system = build_system(media, law, solid_contacts_for(sc, media), exc, walls)
     vel = np.zeros((system.n, 2))
     om = np.zeros(system.n)

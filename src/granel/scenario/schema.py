@@ -190,6 +190,9 @@ class MediumSpec(_Strict):
     walls: list[Literal["bottom", "top", "left", "right", "outer", "face"]] | None = Field(
         None, description="the rigid walls that close the medium, instead of channel_walls/outer_wall: the channel "
                           "walls (bottom/top for left/right growth, left/right for up/down), outer, face")
+    undamped_walls: list[Literal["bottom", "top", "left", "right", "outer", "face"]] | None = Field(
+        None, description="those of the medium's walls whose contacts have no dashpot (Hertz alone: elastic walls); "
+                          "the others are damped (eq. 3 with m* = m)")
     gap: float = Field(0.0, ge=0)
     granules_file: str | None = None
     radii: list[Annotated[float, Field(ge=LENGTH_MIN, le=LENGTH_MAX)]] | None = Field(
@@ -221,6 +224,7 @@ class MediumSpec(_Strict):
                 raise ValueError(f"materials: {len(self.materials)} given for {len(self.radii)} beads (radii)")
             self._check_growth("a chain")
             self._check_walls(("face", "outer"), "a chain")
+            self._check_undamped(tuple(self.walls or ()))
             return self
         if self.materials is not None:
             raise ValueError("materials: only a chain (radii) takes per-bead materials; a granules_file has a "
@@ -249,7 +253,11 @@ class MediumSpec(_Strict):
                     self.__dict__["channel_walls"] = True
                 if self.outer_wall is None:
                     self.__dict__["outer_wall"] = False
+            self._check_undamped(self.wall_names())
         else:
+            if self.undamped_walls is not None:
+                raise ValueError("undamped_walls: a medium from granules_file has no walls of its own (give its "
+                                 "[[walls]] damped = false)")
             for key in ("grow", "face_y", "center_x", "walls"):
                 if getattr(self, key) is not None:
                     raise ValueError(f"{key}: a medium from granules_file takes its geometry from the file "
@@ -273,6 +281,14 @@ class MediumSpec(_Strict):
         if self.walls is not None and "face" in self.walls and self.side != "none":
             raise ValueError("walls: 'face' would lie on the solid's face; only a medium with side = 'none' has a "
                              "face wall")
+
+    def _check_undamped(self, walls: tuple[str, ...]) -> None:
+        """`undamped_walls` names only walls the medium has, each once."""
+        for w in self.undamped_walls or []:
+            if w not in walls:
+                raise ValueError(f"undamped_walls: {w!r} is not one of the medium's walls {list(walls)}")
+        if self.undamped_walls is not None and len(set(self.undamped_walls)) != len(self.undamped_walls):
+            raise ValueError(f"undamped_walls: {self.undamped_walls} names a wall twice")
 
     def wall_names(self) -> tuple[str, ...]:
         """The walls of a hexagonal packing: `walls`, or the channel and outer walls' switches."""
@@ -325,6 +341,8 @@ class WallSpec(_Strict):
     medium: str = ""
     name: str = ""
     motion: WallMotionSpec | None = None
+    damped: bool = Field(True, description="the Tsuji dashpot of eq. (3) at its contacts, with m* = m; false: Hertz "
+                                           "alone (an elastic wall, no dissipation at its contacts)")
 
     @model_validator(mode="after")
     def _nondegenerate(self):

@@ -27,7 +27,7 @@ from .. import scenario as S
 from ..guard.exits import NotWritten
 from ..io.results import ResultFileError
 from .modes import ModeName, study_mode
-from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, SpectrumSpec, write_spectrum
+from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, SpectrumSpec, spectrum_chain, write_spectrum
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
@@ -35,8 +35,9 @@ MAX_CASES = 100_000
 # driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
 # `modes.force_metrics`; 4: a chain's measured cut-off, `modes.chain_metrics`; 5: energy shares
 # of the dynamic input alone, NaN with a reason where nothing is dynamic, and the cut-off by modal
-# projection), so that cached results are recomputed
-METRIC_RULES = 5
+# projection; 6: a spectrum run's wall_force, the cut-off of diatomic chains and chains on the
+# solid), so that cached results are recomputed
+METRIC_RULES = 6
 
 
 class SweepFileError(S.ScenarioError):
@@ -501,7 +502,7 @@ def sweep_study(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, sche
     if spec.mode == "spectrum":
         path = Path(out_dir) / "spectrum.nc"
         try:
-            write_spectrum(ds, spec.spectrum, path)
+            write_spectrum(ds, spec.spectrum, path, *stored_chain(spec, out_dir))
         except OSError as e:
             raise NotWritten("the spectrum", path, e) from e
     return ds
@@ -611,6 +612,31 @@ def spectrum_sweep(scenario: str, overrides, frequencies, amplitudes, **settings
                  {"field": AMPLITUDE_FIELD, "values": list(amplitudes)}]})
 
 
+def stored_chain(spec: SweepSpec, out_dir) -> tuple[Any, str]:
+    """(The linearised chain of a spectrum's runs, `spectrum.spectrum_chain`, or None; why there
+    is none): read from the first stored forward run, in `out_dir`/cases, of a case at the first
+    value of every axis besides frequency and amplitude (the axes the report reads)."""
+    from ..analysis.chain import ChainError
+    from ..io.results import read_netcdf
+
+    free = {a.dim for a in spec.axes if a.field in (FREQUENCY_FIELD, AMPLITUDE_FIELD)}
+    dims = [a.dim for a in spec.axes]
+    for case in cases(spec):
+        if any(i != 0 for d, i in zip(dims, case["index"]) if d not in free):
+            continue
+        path = Path(out_dir) / "cases" / f"{case['tag']}__fwd.nc"
+        if not path.exists():
+            continue
+        try:
+            run = read_netcdf(path)
+            return spectrum_chain(run, spec.spectrum), ""
+        except ChainError as e:
+            return None, str(e)
+        except (ResultFileError, OSError, ValueError, KeyError):
+            continue  # unreadable, or of an earlier granel: try the next case's
+    return None, "no stored run of the spectrum to read its chain from"
+
+
 def cases_folder(path):
     """Where `run_spectrum` keeps the runs of the spectrum written to `path`: PATH with .cases."""
     return Path(path).with_suffix(".cases")
@@ -624,6 +650,6 @@ def run_spectrum(spec, path, workers: int = 2, scheduler: str | None = None, pro
     folder passes as it is."""
     summary = run_spec(spec, Path("."), cases_folder(path), workers, scheduler, progress)
     try:
-        return write_spectrum(summary, spec.spectrum, path)
+        return write_spectrum(summary, spec.spectrum, path, *stored_chain(spec, cases_folder(path)))
     except OSError as e:
         raise NotWritten("the spectrum", path, e) from e
