@@ -11,7 +11,8 @@ Motion in Elastic Solids", sec. 8.1; Rose, "Ultrasonic Guided Waves in Solids", 
 
 with p^2 = (w / c_p)^2 - k^2 and q^2 = (w / c_s)^2 - k^2. `rayleigh_lamb` evaluates them in a
 form without poles (`rayleigh_lamb` says how); `lamb_frequencies` finds their roots in frequency
-at each wavenumber (sign changes on a scan, then bisection). The beam's branch is Euler-Bernoulli's (`euler_bernoulli_frequency`).
+at each wavenumber (sign changes on a scan, then bisection). The beam's branch is
+Euler-Bernoulli's (`euler_bernoulli_frequency`).
 """
 
 from __future__ import annotations
