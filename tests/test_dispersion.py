@@ -147,6 +147,23 @@ def test_branches_are_ordered_and_roots():
                 assert lo * hi <= 0
 
 
+def test_lowest_phase_speeds_are_monotone():
+    """Over kh from 1e-5 to 1e3, A0's phase speed rises from 0 toward the Rayleigh speed and S0's
+    falls from the plate speed toward it, monotonically (Graff sec. 8.1, Rose ch. 6): a spurious
+    root (a sign change of rounding near w = 0) would break either (it did, at kh ~ 1, before
+    the terms' small-argument forms were made exact)."""
+    c_p, c_s = SPEEDS
+    c_r = rayleigh_speed(c_p, c_s)
+    plate = 2 * c_s * math.sqrt(1 - (c_s / c_p) ** 2)
+    k = np.geomspace(1e-5, 1e3, 300) / H
+    b = lamb_branches(k, H, SPEEDS, 1)
+    a0, s0 = 2 * np.pi * b.antisymmetric[0] / k, 2 * np.pi * b.symmetric[0] / k
+    # monotone to the roots' accuracy (where the speeds have converged, they differ by less)
+    assert np.all(np.diff(a0) > -ROOTS * c_r) and np.all(a0 < c_r * (1 + ROOTS))
+    assert np.all(np.diff(s0) < ROOTS * plate) and np.all(s0 > c_r * (1 - ROOTS)) and np.all(s0 < plate * (1 + ROOTS))
+    assert a0[0] < 1e-4 * c_r and s0[0] > plate * (1 - 1e-9)
+
+
 def test_bad_arguments():
     with pytest.raises(ValueError):
         lamb_frequencies([1.0], H, SPEEDS, "shear")

@@ -70,7 +70,10 @@ def _shc_difference(d, s):
     (d^2 - s^2) sum_j d^2j s^2(n-1-j)."""
     d, s = np.broadcast_arrays(np.asarray(d, float), np.asarray(s, float))
     safe_d = np.where(d > 0, d, 1.0)
-    direct = np.where(d > 0, 0.5 * (np.exp(d - s) - np.exp(-d - s)) / safe_d, np.exp(-s)) + 0.5 * np.expm1(-2 * s) / s
+    small = np.minimum(d, 1.0)  # sinh(d) / d, accurate as d -> 0, or (e^(d-s) - e^(-d-s)) / 2d, finite for large d
+    shc_d = np.where(d < 1, np.where(d > 0, np.sinh(small) / np.where(d > 0, small, 1.0), 1.0) * np.exp(-s),
+                     0.5 * (np.exp(d - s) - np.exp(-d - s)) / safe_d)
+    direct = shc_d + 0.5 * np.expm1(-2 * s) / s
     d2, s2 = d * d, s * s
     total, inner, fact = np.zeros_like(s), np.ones_like(s), 6.0  # inner: sum_j d^2j s^2(n-1-j), n = 1
     for n in range(1, 12):
