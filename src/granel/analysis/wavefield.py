@@ -231,7 +231,8 @@ def sampled_velocities(ds, lines: NodeLines, shapes: np.ndarray | None = None, n
         out = (lines.sampling.astype(np.float32) @ v.T).T
     else:
         if shapes.shape[1] != ds.sizes["mode"]:
-            raise ResultFileError(f"{name}: its solid state has {ds.sizes['mode']} modes, its solid {shapes.shape[1]}", 2)
+            raise ResultFileError(f"{name}: its solid state has {ds.sizes['mode']} modes, its solid "
+                                  f"{shapes.shape[1]}", 2)
         out = np.asarray(ds["solid_eta_dot"].values, np.float32) @ shapes.T
     return np.asarray(out, float).reshape(-1, *lines.shape)
 

@@ -149,12 +149,12 @@ def wavefield_dataset(wf, source: str = "") -> "xr.Dataset":
     s, fk = wf.spectrum, wf.fk
     curves = wf.branches.curves()
     f32 = np.float32
+    band_energy = np.stack([s.energy[(s.k >= lo) & (s.k < hi)].sum(axis=0) for lo, hi in wf.bands])
     data = {
-        "energy_line": (("x", "k", "t"), s.energy_line.astype(f32), {"units": "J", "long_name": "kinetic energy of "
-                                                                                                "each harmonic per line"}),
+        "energy_line": (("x", "k", "t"), s.energy_line.astype(f32),
+                        {"units": "J", "long_name": "kinetic energy of each harmonic per line"}),
         "band_edges": (("band", "edge"), wf.bands, {"units": "rad/m"}),
-        "band_energy": (("band", "t"), np.stack([s.energy[(s.k >= lo) & (s.k < hi)].sum(axis=0) for lo, hi in wf.bands]),
-                        {"units": "J", "long_name": "kinetic energy of each band"}),
+        "band_energy": (("band", "t"), band_energy, {"units": "J", "long_name": "kinetic energy of each band"}),
         "band_density": (("band", "y", "t"), wf.band_density.astype(f32),
                          {"units": "J/m", "long_name": "kinetic energy per unit length of each band's field"}),
         "fk_power": (("k_map", "f"), fk.power.astype(f32),

@@ -41,7 +41,8 @@ def kt_figure(wf: Wavefield, title: str = ""):
     sel = s.k <= top
     _log_image(ax, s.t * 1e3, s.k[sel], s.energy[sel].T, "kinetic energy E(k, t) [J]")
     ax.plot(s.t * 1e3, wf.moments.centroid, color="cyan", lw=1.0, label="centroid")
-    ax.axhline(wf.moments.k_max, color="white", ls=":", lw=1, label=f"moments' range: k <= {wf.moments.k_max:.0f} rad/m")
+    ax.axhline(wf.moments.k_max, color="white", ls=":", lw=1,
+               label=f"moments' range: k <= {wf.moments.k_max:.0f} rad/m")
     if wf.k_resolved <= top:
         ax.axhline(wf.k_resolved, color="white", ls="--", lw=0.8, label="element resolution limit")
     ax.set(xlabel="t [ms]", ylabel="k [rad/m]", ylim=(0, top), title=title or "kinetic energy over wavenumber and time")
