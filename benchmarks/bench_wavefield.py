@@ -73,8 +73,9 @@ def main():
     if a.json:
         print(json.dumps(res, indent=2))
         return
+    verdict = "ok" if median <= BOUND_S else "EXCEEDED"
     print(f"granel wavefield on a 0.8 ms plate result: median {median:.2f} s over {a.runs} fresh processes "
-          f"({', '.join(f'{t:.2f}' for t in times)}); bound {BOUND_S:.0f} s: {'ok' if median <= BOUND_S else 'EXCEEDED'}")
+          f"({', '.join(f'{t:.2f}' for t in times)}); bound {BOUND_S:.0f} s: {verdict}")
     print(f"in one process: reading {inside['read_s']:.2f} s, the study {inside['study_s']:.2f} s:")
     for k, v in inside["steps_s"].items():
         print(f"  {k}: {v:.2f} s")

@@ -33,7 +33,8 @@ def harmonic(ends, k, s):
 def test_a_sampled_harmonic_has_one_amplitude(ends):
     b = W.spatial_basis(0.0, L, 64, ends)
     s = b.y - b.y0
-    expected_k = {(True, True): np.arange(1, 65), (False, False): np.arange(64)}.get(ends, np.arange(64) + 0.5) * np.pi / L
+    index = {(True, True): np.arange(1, 65), (False, False): np.arange(64)}.get(ends, np.arange(64) + 0.5)
+    expected_k = index * np.pi / L
     np.testing.assert_allclose(b.k, expected_k, rtol=1e-15)
     for n in (0, 5, 63):
         a = W.forward(b, harmonic(ends, b.k[n], s))
