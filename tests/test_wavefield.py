@@ -264,3 +264,20 @@ def test_bad_files(runs, tmp_path):
     code, out = invoke(["wavefield", runs["plate"], "-o", mine])
     assert code == 2 and "keep.txt" in out
     assert sorted(p.name for p in mine.iterdir()) == ["keep.txt"]
+
+
+def test_nodal_and_modal_states_give_one_field(runs):
+    """A result that stores the reduced nodal state (solids too large for all modes) gives the
+    velocities its modal twin gives: q' = Phi eta' mapped by the same lines."""
+    from granel.analysis.result_model import result_modes, result_solid
+    from granel.run import load_result
+
+    ds = load_result(runs["plate"])
+    model, modes = result_solid(ds), result_modes(ds)
+    lines = W.node_lines(model)
+    modal = W.sampled_velocities(ds, lines, W.sampled_shapes(lines, modes))
+    v = (np.asarray(modes.shapes) @ ds["solid_eta_dot"].values.astype(float).T).T
+    nodal = ds.drop_vars(["solid_eta", "solid_eta_dot", "mode_omega"]).assign(
+        solid_v=(("solid_time", "dof"), v.astype(np.float32)))
+    # both stored and multiplied in float32 (6e-8 a rounding, over sums of 3584 terms)
+    np.testing.assert_allclose(W.sampled_velocities(nodal, lines), modal, rtol=1e-4, atol=1e-6 * np.abs(modal).max())
