@@ -36,9 +36,10 @@ from .dispersion import LambBranches, euler_bernoulli_frequency, lamb_branches, 
 
 ENDS = {(True, True): "clamped-clamped", (False, False): "free-free", (True, False): "clamped-free",
         (False, True): "free-clamped"}
-# the relative frequency error of quadratic finite elements with consistent mass (kl)^4 / 1440
-# at wavenumber k and element length l (Ainsworth, J. Comput. Phys. 198 (2004), the p = 2 case of
-# his eq. (3.4); a 1-D Bloch analysis of the elements gives 0.0023 at kl = 1.38, the formula 0.0025)
+# the relative frequency error of quadratic finite elements with consistent mass, (kl)^4 / 1440 at
+# wavenumber k and element length l: the leading term [p!/(2p)!]^2 (kl)^2p / (2 (2p + 1)) of
+# Ainsworth (SIAM J. Numer. Anal. 42, 2004) for degree p = 2; the beam's Hermite cubics share it
+# (tests/test_wavefield.py: Bloch analyses of both elements)
 FE_DISPERSION = 1.0 / 1440.0
 # the frequency error the wavenumbers called resolved stay below (`resolved_wavenumber`)
 FE_ERROR = 0.0025
@@ -483,14 +484,13 @@ class SolidBranches:
 
 
 def solid_branches(model, k, count: int = 3) -> SolidBranches:
-    """The branches of a plate or beam from its recipe: the plate's strip of width h with the
-    plane-stress speeds of its E, nu, rho (`dispersion.plane_stress_speeds`, `lamb_branches`),
-    the beam's EI = E t w^3 / 12 over rho A = rho t w (`euler_bernoulli_frequency`)."""
+    """The branches of a plate or beam: the plate's strip of width h with the plane-stress speeds
+    of its recipe's E, nu, rho (`dispersion.plane_stress_speeds`, `lamb_branches`), the beam's EI
+    and rho A as `solid.beam.build_beam` made them (`euler_bernoulli_frequency`)."""
     r = model.recipe
     k = np.asarray(k, float)
     if model.kind == "beam":
-        return SolidBranches(k, flexural=euler_bernoulli_frequency(k, r.E * r.thickness * r.width**3 / 12,
-                                                                   r.rho * r.thickness * r.width))
+        return SolidBranches(k, flexural=euler_bernoulli_frequency(k, model.info["EI"], model.info["rhoA"]))
     return SolidBranches(k, lamb=lamb_branches(k, r.width, plane_stress_speeds(r.E, r.nu, r.rho), count))
 
 
