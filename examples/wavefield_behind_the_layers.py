@@ -23,6 +23,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 
 from granel import scenario as S  # noqa: E402
 from granel.analysis.result_model import result_modes, result_solid  # noqa: E402
@@ -67,8 +68,6 @@ for j, (label, wf) in enumerate(results.items()):
     E = wf.modal.energy
     sel = k <= wf.k_resolved
     top = E[sel].max()
-    from matplotlib.colors import LogNorm
-
     im = axes[0, j].pcolormesh(t, k[sel], np.maximum(E[sel], 1e-5 * top), shading="auto", cmap="magma",
                                norm=LogNorm(1e-5 * top, top), rasterized=True)
     fig.colorbar(im, ax=axes[0, j], label="modal energy [J]")
