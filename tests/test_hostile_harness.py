@@ -820,7 +820,7 @@ def test_hostile_option_values(assets, case):
 
 
 COMMANDS = ["run", "show", "init", "modes", "paper", "reciprocity", "animate", "bench", "sweep", "spectrum", "design",
-            "export", "map", "scenarios"]
+            "export", "map", "scenarios", "wavefield"]
 USAGE = [[], ["scenarios"], ["--bogus"], ["nocommand"], ["--version"], ["--version", "--bogus"], ["scenarios", "extra"],
          ["run", "--output-every", "1us"], ["run", "paper", "--fmax", "5"], ["run", "paper", "--solid"],
          ["run", "paper", "--set"], ["run", "paper", "--set", "novalue"], ["run", "paper", "--set", "=1"],

@@ -873,6 +873,80 @@ def export(
     console.print(f"wrote {len(written)} files ({', '.join(formats)}) in {out}")
 
 
+@app.command()
+def wavefield(
+    result: Path = typer.Argument(..., help="a result NetCDF file of `granel run` with a plate or a beam"),
+    out: Path = typer.Option(..., "-o", "--out", help="output folder: wavefield.nc, kt.png, fk.png, moments.png, "
+                                                      "bands.png (and bands.mp4 with --movie)"),
+    bands: Optional[str] = typer.Option(None, help="a count of equal wavenumber bands up to --k-max (default 4), or "
+                                                   "their edges in rad/m, e.g. 0,200,400,700"),
+    k_max: Optional[float] = typer.Option(None, "--k-max", help="largest wavenumber of the spectrum's moments "
+                                                                "[rad/m] (default: the elements' resolution limit)"),
+    fit: Optional[str] = typer.Option(None, help="the variance's growth-law window START:END, e.g. 0.1ms:0.8ms "
+                                                 "(default: from the energy's arrival to the end)"),
+    movie: bool = typer.Option(False, "--movie", help="also bands.mp4, the band-filtered fields over time"),
+    frames: int = typer.Option(120, help="movie frames"),
+    fps: int = typer.Option(20, help="movie frames per second"),
+):
+    """The solid's wavefield in wavenumber and time (docs/wavefield.md): the kinetic energy E(k, t)
+    of its harmonics along the length (sine transform for clamped ends), the band-filtered fields,
+    the spectrum's centroid, variance (with its growth exponent) and entropy over time, and the
+    frequency-wavenumber map with the analytic dispersion branches (Rayleigh-Lamb for a plate,
+    Euler-Bernoulli for a beam). Exit code 2 for a result without a plate or beam."""
+    from .guard.exits import InputError
+    from .guard.outputs import OutputPlan
+    from .guard.reading import check_file
+    from .io.results import ResultFileError
+    from .studies.wavefield import (FILES, MOVIE, WavefieldOptions, check_options, parse_bands, parse_window,
+                                    plan_wavefield, read_wavefield_result, stage_count, wavefield_study)
+
+    try:
+        band_spec = parse_bands(bands)
+    except ValueError as e:
+        _fail(f"--bands {bands}: {e}")
+    try:
+        window = parse_window(fit)
+    except ValueError as e:
+        _fail(f"--fit {fit}: {e}")
+    options = WavefieldOptions(band_spec, k_max, window, movie, frames, fps)
+    try:
+        check_options(options)
+    except InputError as e:
+        _fail(str(e))
+    check_file(result, "result file")
+    plan = OutputPlan(inputs=[result])
+    plan.folder(out, "-o", "wavefield", recognise=lambda p: (p / "wavefield.nc").exists())
+    for name in FILES + ((MOVIE,) if movie else ()):
+        plan.file(out / name, f"-o (its {name})")
+    plan.check()
+    try:
+        ds = read_wavefield_result(result)
+        settled = plan_wavefield(ds, options, result)
+    except (ResultFileError, InputError) as e:
+        _fail(str(e), e.code)
+    plan.prepare()
+    try:
+        with Progress(TextColumn("[bold]wavefield[/] {task.description}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(), console=console,
+                      transient=True) as bar:
+            task = bar.add_task("", total=stage_count(options))
+            report = wavefield_study(ds, out, options, lambda what, done, total: bar.update(task, completed=done,
+                                                                                          description=what),
+                                     name=result, plan=settled)
+    except OSError as e:
+        _fail(f"-o {out}: cannot write the wavefield ({e})", 4)
+    t = Table(show_header=False, title=f"granel wavefield: {result.name}")
+    t.add_row("variance growth exponent", f"kinetic {report.exponent:.3f} +- {report.stderr:.3f}, modal "
+              f"{report.modal_exponent:.3f} +- {report.modal_stderr:.3f} (fit over {report.fit[0] * 1e3:.4f}-"
+              f"{report.fit[1] * 1e3:.4f} ms)")
+    t.add_row("entropy at the end", f"{report.entropy_end:.3f} nats")
+    t.add_row("wavenumbers analysed", f"k <= {report.k_max:.1f} rad/m (elements resolve {report.k_resolved:.1f})")
+    t.add_row("ridges on the map", f"{report.ridges} (k >= {report.k_window:.1f} rad/m)")
+    t.add_row("time", f"{report.seconds:.2f} s")
+    Console().print(t)
+    console.print(f"wrote {', '.join(str(p.name) for p in report.files)} in {out}")
+
+
 @app.command("map")
 def map_(
     summary: Path = typer.Argument(..., help="a sweep's summary.nc"),

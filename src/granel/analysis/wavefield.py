@@ -1,0 +1,610 @@
+"""The solid's wavefield along its length, in wavenumber and time (issue 31; the method of the
+reference study's 2025 follow-up, arXiv 2509.15415): pure functions of a result Dataset and its
+solid model. docs/wavefield.md states the definitions with their equations.
+
+1. `node_lines`: lines of nodes along the solid's length (y), at fixed positions across its width
+   (x): the plate's vertex columns, on which its Q8 field is exactly the quadratic through each
+   element side's three nodes, or the beam's nodes. The velocity (both in-plane components on
+   the plate, the deflection on the beam) is sampled on a uniform grid of each line.
+2. `spatial_basis`: the transform along the length that fits the ends: sines sin(n pi s / L)
+   where both ends are clamped (every velocity component vanishes there; DST-I), cosines where
+   both are free (DCT-I), quarter-wave sines sin((n + 1/2) pi s / L) clamped at one end and free
+   at the other (DST-III); s = y - y0.
+3. `wavenumber_spectrum`: the kinetic energy E(k, t) of each harmonic, summed over the width
+   (and kept per line): by the basis' orthogonality (Parseval) it adds up to the kinetic energy
+   of the sampled field; `band_field` transforms a band of harmonics back to space.
+4. `spectral_moments`: per time, the centroid, variance and Shannon entropy of E(k, t)
+   normalised to a distribution; `growth_exponent` fits the variance's power law.
+5. `frequency_wavenumber_map`: the whole record's power over wavenumber and frequency, through
+   Hann windows in time and along the length (a Fourier transform in both: a clamped end turns
+   a flexural standing wave's sine phase, so its sine transform puts it half a step off its
+   wavenumber; the windowed transform reads the wavenumber of the field between the ends);
+   `map_ridges` locates its ridges; `solid_branches` gives the analytic dispersion to draw over it
+   (`analysis.dispersion`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..io.results import ResultFileError
+from .dispersion import LambBranches, euler_bernoulli_frequency, lamb_branches, plane_stress_speeds
+
+ENDS = {(True, True): "clamped-clamped", (False, False): "free-free", (True, False): "clamped-free",
+        (False, True): "free-clamped"}
+# the relative frequency error of quadratic finite elements with consistent mass, (kl)^4 / 1440 at
+# wavenumber k and element length l: the leading term [p!/(2p)!]^2 (kl)^2p / (2 (2p + 1)) of
+# Ainsworth (SIAM J. Numer. Anal. 42, 2004) for degree p = 2; the beam's Hermite cubics share it
+# (tests/test_wavefield.py: Bloch analyses of both elements)
+FE_DISPERSION = 1.0 / 1440.0
+# the frequency error the wavenumbers called resolved stay below (`resolved_wavenumber`)
+FE_ERROR = 0.0025
+
+
+# --------------------------------------------------------------------------------------------
+# 1.-2. where the field is sampled, and the transform along the length
+
+
+@dataclass(frozen=True)
+class SpatialBasis:
+    """The transform along the length [y0, y0 + length] that fits the ends: samples y (N,) [m],
+    wavenumbers k (N,) [rad/m], and each harmonic's squared norm, the trapezoid rule's integral
+    of phi_n^2 over the length on the samples (N,) [m]; `ends` names the end conditions."""
+
+    ends: str
+    y0: float
+    length: float
+    y: np.ndarray
+    k: np.ndarray
+    norm: np.ndarray
+
+
+def spatial_basis(y0: float, length: float, samples: int, clamped: tuple[bool, bool]) -> SpatialBasis:
+    """The basis of `ENDS[clamped]` on `samples` uniform points (module docstring, item 2):
+    clamped-clamped: the interior points s_j = j L / (N + 1), k_n = n pi / L, n = 1..N;
+    free-free: s_j = j L / (N - 1), j = 0..N-1 (both ends), k_n = n pi / L, n = 0..N-1;
+    clamped at one end: s_j = j L / N, j = 1..N (the free end included), k_n = (n + 1/2) pi / L."""
+    ends = ENDS[tuple(bool(c) for c in clamped)]
+    n, L = int(samples), float(length)
+    if n < 2 or not L > 0:
+        raise ValueError(f"spatial_basis: need 2 or more samples and a positive length (got {samples}, {length})")
+    j = np.arange(n)
+    if ends == "clamped-clamped":
+        s, k, norm = (j + 1) * L / (n + 1), (j + 1) * np.pi / L, np.full(n, L / 2)
+    elif ends == "free-free":
+        s, k = j * L / (n - 1), j * np.pi / L
+        norm = np.where((j == 0) | (j == n - 1), L, L / 2)
+    else:
+        s, k, norm = (j + 1) * L / n, (j + 0.5) * np.pi / L, np.full(n, L / 2)
+        if ends == "free-clamped":
+            s = L - s[::-1]  # the mirror image: free at y0, clamped at y0 + L
+    return SpatialBasis(ends, float(y0), L, y0 + s, k, norm)
+
+
+def basis_functions(basis: SpatialBasis) -> np.ndarray:
+    """phi_n(y_j), (N samples, N harmonics): sin(k s), cos(k s) or, clamped at the top only,
+    sin(k (L - s))."""
+    s = basis.y - basis.y0
+    if basis.ends == "free-free":
+        return np.cos(np.outer(s, basis.k))
+    if basis.ends == "free-clamped":
+        return np.sin(np.outer(basis.length - s, basis.k))
+    return np.sin(np.outer(s, basis.k))
+
+
+def forward(basis: SpatialBasis, v: np.ndarray) -> np.ndarray:
+    """Amplitudes a_n (..., N) of samples v (..., N) along the last axis, v(y_j) = sum_n a_n
+    phi_n(y_j): DST-I / (N + 1), DCT-I / (N - 1) (halved at n = 0 and N - 1) or DST-III / N
+    (scipy.fft's unnormalised transforms, whose sums are the trapezoid rule's)."""
+    from scipy.fft import dct, dst
+
+    n = v.shape[-1]
+    if basis.ends == "clamped-clamped":
+        return dst(v, type=1, axis=-1) / (n + 1)
+    if basis.ends == "free-free":
+        a = dct(v, type=1, axis=-1) / (n - 1)
+        a[..., [0, -1]] *= 0.5
+        return a
+    if basis.ends == "free-clamped":
+        return dst(v[..., ::-1], type=3, axis=-1) / n
+    return dst(v, type=3, axis=-1) / n
+
+
+def inverse(basis: SpatialBasis, a: np.ndarray) -> np.ndarray:
+    """The samples v (..., N) of amplitudes a (..., N): sum_n a_n phi_n(y_j) (`forward`'s inverse)."""
+    from scipy.fft import dct, dst
+
+    if basis.ends == "clamped-clamped":
+        return dst(a, type=1, axis=-1) / 2
+    if basis.ends == "free-free":
+        b = np.array(a, float, copy=True)
+        b[..., [0, -1]] *= 2
+        return dct(b, type=1, axis=-1) / 2
+    v = dst(a, type=2, axis=-1) / 2
+    return v[..., ::-1] if basis.ends == "free-clamped" else v
+
+
+@dataclass(frozen=True)
+class NodeLines:
+    """Lines of a solid's nodes along its length: their positions across the width x (nl,) [m],
+    the mass per unit length each stands for (nl,) [kg/m] (rho thickness times the trapezoid
+    rule's width share on the plate, rho A on the beam), the velocity components sampled
+    ("x", "y" on the plate: across and along the length; "x" on the beam), the basis along the
+    length and the sparse map from the reduced DOFs to the sampled velocities, rows ordered
+    (line, component, sample). `element` is the longest element along the length [m]."""
+
+    kind: str
+    x: np.ndarray
+    mass: np.ndarray
+    components: tuple[str, ...]
+    basis: SpatialBasis
+    sampling: sp.csr_matrix
+    element: float
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return len(self.x), len(self.components), len(self.basis.y)
+
+
+def _quadratic_weights(y: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (n, 3), weights (n, 3)) of the quadratic Lagrange interpolation at points y
+    through the node triples (vertex, mid-side, vertex) of a line whose sorted node heights are
+    `nodes` (2 m + 1 of them)."""
+    sides = (len(nodes) - 1) // 2
+    m = np.clip(np.searchsorted(nodes[2::2], y, side="left"), 0, sides - 1)
+    idx = np.stack([2 * m, 2 * m + 1, 2 * m + 2], axis=1)
+    p = nodes[idx]
+    w = np.empty_like(p)
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        w[:, a] = (y - p[:, b]) * (y - p[:, c]) / ((p[:, a] - p[:, b]) * (p[:, a] - p[:, c]))
+    return idx, w
+
+
+def node_lines(model, samples: int | None = None) -> NodeLines:
+    """The node lines of a plate or beam model (built from its recipe: `model.recipe`). A
+    plate's lines are its vertex columns, sampled at `samples` points (default: two per the
+    longest node gap along the length, so that the coarsest elements' nodes are resolved); a
+    beam's line is its nodes. ValueError for another kind of solid."""
+    r = model.recipe
+    if model.kind not in ("plate", "beam") or r is None or model.nodes is None:
+        raise ValueError(f"a {model.kind} solid has no wavefield (a plate or a beam built from its recipe has)")
+    clamped = tuple(bool(c) for c in r.clamped)
+    nodes = np.asarray(model.nodes, float)
+    if model.kind == "beam":
+        ne = len(nodes) - 1
+        count = {(True, True): ne - 1, (False, False): ne + 1}.get(clamped, ne)
+        basis = spatial_basis(r.y0, r.length, count, clamped)
+        at = np.rint((basis.y - r.y0) / (r.length / ne)).astype(int)
+        S = sp.csr_matrix((np.ones(count), (np.arange(count), 2 * at)), shape=(count, model.T.shape[0]))
+        return NodeLines("beam", np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",),
+                         basis, (S @ model.T).tocsr(), float(r.length / ne))
+    ny = int(model.info["ny"])
+    tol = 1e-9 * r.width
+    xs = np.unique(np.round(nodes[:, 0] / tol) * tol)
+    columns = [np.flatnonzero(np.abs(nodes[:, 0] - x) < 2 * tol) for x in xs]
+    columns = [c[np.argsort(nodes[c, 1])] for c in columns if len(c) == 2 * ny + 1]
+    x = np.array([nodes[c[0], 0] for c in columns])
+    gaps = max(float(np.diff(nodes[c, 1]).max()) for c in columns)
+    if samples is None:
+        samples = int(math.ceil(2 * r.length / gaps))
+    basis = spatial_basis(r.y0, r.length, samples, clamped)
+    rows, cols, vals = [], [], []
+    n = len(basis.y)
+    for i, c in enumerate(columns):
+        idx, w = _quadratic_weights(basis.y, nodes[c, 1])
+        for comp in (0, 1):
+            dofs = np.asarray(model.node_dofs[comp])[c][idx]
+            rows.append(np.repeat((2 * i + comp) * n + np.arange(n), 3))
+            cols.append(dofs.ravel())
+            vals.append(w.ravel())
+    S = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(2 * len(columns) * n, model.T.shape[0]))
+    share = np.zeros(len(x))  # the trapezoid rule across the width
+    share[:-1] += np.diff(x) / 2
+    share[1:] += np.diff(x) / 2
+    return NodeLines("plate", x, r.rho * r.thickness * share, ("x", "y"), basis, (S @ model.T).tocsr(), 2 * gaps)
+
+
+def resolved_wavenumber(lines: NodeLines, error: float = FE_ERROR) -> float:
+    """The wavenumber [rad/m] below which the elements' dispersion error stays under `error`:
+    (kl)^4 FE_DISPERSION = error with l the longest element along the length, the estimate of
+    quadratic elements (the plate's Q8 sides; the beam's Hermite cubics are more accurate) for a
+    1-D wave along the element."""
+    return (error / FE_DISPERSION) ** 0.25 / lines.element
+
+
+def sampled_shapes(lines: NodeLines, modes) -> np.ndarray:
+    """The mode shapes at the lines' samples, (rows, modes) float32 (rows as `lines.sampling`)."""
+    return np.asarray(lines.sampling @ np.asarray(modes.shapes), np.float32)
+
+
+def sampled_velocities(ds, lines: NodeLines, shapes: np.ndarray | None = None, name="result") -> np.ndarray:
+    """The velocities at the lines' samples at every stored solid output, (nt, nl, nc, N) [m/s]:
+    the stored reduced velocities mapped by `lines.sampling`, or the modal velocities through the
+    sampled mode shapes (`sampled_shapes`), q' = Phi eta' (float32 products, as the state is stored)."""
+    if "solid_v" in ds:
+        v = np.asarray(ds["solid_v"].values, np.float32)
+        out = (lines.sampling.astype(np.float32) @ v.T).T
+    else:
+        if shapes.shape[1] != ds.sizes["mode"]:
+            raise ResultFileError(f"{name}: its solid state has {ds.sizes['mode']} modes, its solid "
+                                  f"{shapes.shape[1]}", 2)
+        out = np.asarray(ds["solid_eta_dot"].values, np.float32) @ shapes.T
+    return np.asarray(out, float).reshape(-1, *lines.shape)
+
+
+# --------------------------------------------------------------------------------------------
+# 3.-4. the spectrum in wavenumber and time, and its measures
+
+
+@dataclass(frozen=True)
+class WavenumberSpectrum:
+    """The sampled field's harmonics: times t (nt,) [s], wavenumbers k (N,) [rad/m], amplitudes
+    (nt, nl, nc, N) [m/s] and the kinetic energy of each harmonic per line (nl, N, nt) [J]."""
+
+    t: np.ndarray
+    k: np.ndarray
+    amplitude: np.ndarray
+    energy_line: np.ndarray
+
+    @property
+    def energy(self) -> np.ndarray:
+        """E(k, t), (N, nt) [J]: summed over the width."""
+        return self.energy_line.sum(axis=0)
+
+
+def harmonic_energy(amplitude: np.ndarray, lines: NodeLines) -> np.ndarray:
+    """The kinetic energy of each harmonic on each line, (nl, N, nt) [J], of amplitudes
+    (nt, nl, nc, N): E_in = 1/2 m_i |phi_n|^2 sum_c a_inc^2, m_i the line's mass per length and
+    |phi_n|^2 the harmonic's squared norm. Their sum over n is the trapezoid rule's
+    1/2 m_i integral of |v|^2 over the length (Parseval, by the basis' orthogonality)."""
+    e = 0.5 * lines.mass[None, :, None] * lines.basis.norm[None, None, :] * (amplitude**2).sum(axis=2)
+    return np.moveaxis(e, 0, -1)
+
+
+def wavenumber_spectrum(velocities: np.ndarray, lines: NodeLines, t) -> WavenumberSpectrum:
+    """The spectrum of sampled velocities (nt, nl, nc, N) at times t (`forward`, `harmonic_energy`)."""
+    a = forward(lines.basis, np.asarray(velocities, float))
+    return WavenumberSpectrum(np.asarray(t, float), lines.basis.k, a, harmonic_energy(a, lines))
+
+
+def band_field(spectrum: WavenumberSpectrum, lines: NodeLines, k_lo: float, k_hi: float) -> np.ndarray:
+    """The velocity field of the harmonics with k_lo <= k < k_hi back in space, (nt, nl, nc, N)
+    [m/s] at the samples (`inverse` of the band's amplitudes, the others zero)."""
+    keep = (spectrum.k >= k_lo) & (spectrum.k < k_hi)
+    return inverse(lines.basis, np.where(keep, spectrum.amplitude, 0.0))
+
+
+def energy_density(field: np.ndarray, lines: NodeLines) -> np.ndarray:
+    """The kinetic energy per unit length of a sampled field (nt, nl, nc, N), summed over the
+    width: 1/2 sum_i m_i |v_i|^2, (N, nt) [J/m]."""
+    return 0.5 * np.einsum("i,tijn->nt", lines.mass, np.asarray(field, float) ** 2)
+
+
+@dataclass(frozen=True)
+class SpectralMoments:
+    """Per time (nt,): the energy in the wavenumbers analysed `total` [J], the centroid
+    [rad/m], the variance [(rad/m)^2] and the Shannon entropy [nats] of p(k) = E(k, t) / total,
+    over the wavenumbers k <= `k_max`; NaN where the total is 0."""
+
+    total: np.ndarray
+    centroid: np.ndarray
+    variance: np.ndarray
+    entropy: np.ndarray
+    k_max: float
+
+
+def spectral_moments(k, energy, k_max: float = np.inf) -> SpectralMoments:
+    """The moments of E(k, t) (N, nt) over k <= k_max: mu = sum k p, sigma^2 = sum (k - mu)^2 p,
+    H = -sum p ln p (0 ln 0 = 0), with p = E / sum E."""
+    k = np.asarray(k, float)
+    sel = k <= k_max
+    E = np.asarray(energy, float)[sel]
+    kk = k[sel][:, None]
+    total = E.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = E / total
+        mu = (kk * p).sum(axis=0)
+        var = ((kk - mu) ** 2 * p).sum(axis=0)
+        H = -np.where(p > 0, p * np.log(np.where(p > 0, p, 1.0)), 0.0).sum(axis=0)
+    bad = ~(total > 0)
+    for a in (mu, var, H):
+        a[bad] = np.nan
+    return SpectralMoments(total, mu, var, H, float(k_max))
+
+
+def modal_spectrum(ds, lines: NodeLines, shapes: np.ndarray) -> np.ndarray:
+    """The solid's energy over the harmonics, (N, nt) [J]: each mode's energy E_m = 1/2 (eta'^2 +
+    w^2 eta^2) (eq. 15) shared over the harmonics as the kinetic energy of its sampled shape
+    (`harmonic_energy`, normalised to 1 per mode). Free of the exchange between kinetic and
+    strain energy that makes E(k, t) oscillate, it adds up to the solid's energy; the modes'
+    cross terms, which average out over time, are left out."""
+    n_modes = shapes.shape[1]
+    a = forward(lines.basis, np.asarray(shapes, float).T.reshape(n_modes, *lines.shape))
+    share = harmonic_energy(a, lines).sum(axis=0).T  # (modes, N)
+    total = share.sum(axis=1, keepdims=True)
+    share = np.divide(share, total, out=np.zeros_like(share), where=total > 0)
+    eta, etad = np.asarray(ds["solid_eta"].values, float), np.asarray(ds["solid_eta_dot"].values, float)
+    energy = 0.5 * (etad**2 + (np.asarray(ds["mode_omega"].values, float) * eta) ** 2)
+    return (energy @ share).T
+
+
+@dataclass(frozen=True)
+class PowerLaw:
+    """sigma^2(t) = A (t - t0)^exponent fitted by least squares on the logarithms over
+    t0 < t <= t_end: the exponent with its standard error (the regression's, as if the residuals
+    were independent: neighbouring outputs are correlated, so it understates the uncertainty),
+    A [(rad/m)^2 / s^exponent], t0 and t_end [s] and the number of outputs used."""
+
+    exponent: float
+    stderr: float
+    prefactor: float
+    t0: float
+    t_end: float
+    points: int
+
+
+def growth_exponent(t, variance, t0: float, t_end: float) -> PowerLaw:
+    """The variance's growth law over (t0, t_end] (`PowerLaw`): the straight line through
+    (ln(t - t0), ln sigma^2) by least squares. Exponent 1: the spread of a diffusion in k
+    (sigma^2 = sigma_0^2 + 2 D t with sigma_0 small); 2: ballistic; 0: a spectrum that stays put.
+    NaN with fewer than 3 outputs with a finite, positive variance."""
+    t = np.asarray(t, float)
+    var = np.asarray(variance, float)
+    sel = (t > t0) & (t <= t_end) & np.isfinite(var) & (var > 0)
+    n = int(np.count_nonzero(sel))
+    if n < 3:
+        return PowerLaw(np.nan, np.nan, np.nan, float(t0), float(t_end), n)
+    x, y = np.log(t[sel] - t0), np.log(var[sel])
+    X = np.column_stack([np.ones_like(x), x])
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    resid = y - X @ coef
+    cov = float(resid @ resid) / (n - 2) * np.linalg.inv(X.T @ X)
+    return PowerLaw(float(coef[1]), float(np.sqrt(cov[1, 1])), float(np.exp(coef[0])), float(t0), float(t_end), n)
+
+
+def arrival_time(t, total, fraction: float = 0.01) -> float:
+    """The first time the energy `total` reaches `fraction` of its largest value [s] (NaN if it
+    never does)."""
+    total = np.asarray(total, float)
+    top = np.nanmax(total) if np.any(np.isfinite(total)) else np.nan
+    hit = np.flatnonzero(total >= fraction * top) if top > 0 else []
+    return float(np.asarray(t, float)[hit[0]]) if len(hit) else float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# 5. the frequency-wavenumber map and the analytic branches
+
+
+@dataclass(frozen=True)
+class FrequencyWavenumberMap:
+    """The record's power over wavenumber k (nk,) [rad/m] and frequency f (nf,) [Hz], (nk, nf)
+    [J s, up to the windows' constant]: kinetic-energy weighted, summed over the lines and the
+    components; `pad` is the zero-padding factor of both transforms."""
+
+    k: np.ndarray
+    f: np.ndarray
+    power: np.ndarray
+    pad: int
+
+
+def frequency_wavenumber_map(velocities: np.ndarray, lines: NodeLines, t, pad: int = 4) -> FrequencyWavenumberMap:
+    """|V(k, f)|^2 + |V(k, -f)|^2 (waves running either way) of the sampled velocities (nt, nl,
+    nc, N) at uniform times t: the mean-free field times a Hann window in time and a Hann window
+    along the length, Fourier transformed in both (zero-padded `pad` times), weighted by the
+    lines' masses 1/2 m_i dy dt^2 and summed over lines and components. k and f are those of the
+    transforms: 2 pi j / (pad N dy), j / (pad nt dt)."""
+    v = np.asarray(velocities, float)
+    t = np.asarray(t, float)
+    nt, n = v.shape[0], v.shape[-1]
+    if nt < 4:
+        raise ValueError(f"a frequency-wavenumber map needs 4 or more outputs, got {nt}")
+    dt = (t[-1] - t[0]) / (nt - 1)
+    dy = float(lines.basis.y[1] - lines.basis.y[0])
+    v = v - v.mean(axis=0)
+    window = np.outer(np.hanning(nt), np.hanning(n))
+    nt_p, n_p = pad * nt, pad * n
+    power = np.zeros((n_p // 2 + 1, nt_p // 2 + 1))
+    for i in range(v.shape[1]):  # a line and a component at a time: the padded transform stays small
+        for c in range(v.shape[2]):
+            V = np.abs(np.fft.fft(np.fft.rfft(v[:, i, c, :] * window, n=n_p, axis=1), n=nt_p, axis=0)) ** 2
+            V[1:(nt_p + 1) // 2] += V[:nt_p // 2:-1]  # either direction of travel: f and -f
+            power += 0.5 * lines.mass[i] * dy * dt**2 * V[: nt_p // 2 + 1].T
+    k = 2 * np.pi * np.fft.rfftfreq(n_p, dy)
+    f = np.fft.rfftfreq(nt_p, dt)
+    return FrequencyWavenumberMap(k, f, power, int(pad))
+
+
+@dataclass(frozen=True)
+class Ridges:
+    """Points of a map's ridges: wavenumbers k [rad/m], frequencies f [Hz] and powers, each
+    a local maximum of the map in both directions, refined by a parabola through the peak and its
+    neighbours in each (`parabolic_peak`)."""
+
+    k: np.ndarray
+    f: np.ndarray
+    power: np.ndarray
+
+
+def parabolic_peak(left: np.ndarray, centre: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The vertex offset, in samples (within [-1/2, 1/2]), of the parabola through three samples
+    around a maximum (of their logarithms: exact for a Gaussian peak, close for a Hann window's)."""
+    a, b, c = (np.log(np.maximum(x, 1e-300)) for x in (left, centre, right))
+    den = a - 2 * b + c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den < 0, np.clip(0.5 * (a - c) / den, -0.5, 0.5), 0.0)
+
+
+def map_ridges(fk: FrequencyWavenumberMap, floor: float = 1e-3, k_max: float = np.inf,
+               f_max: float = np.inf, reach: int = 3) -> Ridges:
+    """The peaks of the map above `floor` times its largest value over k <= k_max and
+    f <= f_max: the points that are the largest within `reach` bins of the unpadded transforms
+    each way in k and in f (a Hann window's first sidelobe lies 2.5 bins from its peak, so a
+    sidelobe is never taken for a peak; two peaks closer than that count as one), each refined
+    in f and in k by `parabolic_peak`. The map's edges are left out."""
+    from scipy.ndimage import maximum_filter
+
+    P = fk.power
+    half = reach * fk.pad
+    top_of = maximum_filter(P, size=2 * half + 1, mode="nearest")
+    kk, ff = np.meshgrid(fk.k, fk.f, indexing="ij")
+    region = (kk <= k_max) & (ff <= f_max)
+    region[[0, -1], :] = False
+    region[:, [0, -1]] = False
+    top = P[region].max() if np.any(region) else 0.0
+    i, j = np.nonzero((P == top_of) & region & (P >= floor * top) & (P > 0))
+    dk, df = fk.k[1] - fk.k[0], fk.f[1] - fk.f[0]
+    k = fk.k[i] + dk * parabolic_peak(P[i - 1, j], P[i, j], P[i + 1, j])
+    f = fk.f[j] + df * parabolic_peak(P[i, j - 1], P[i, j], P[i, j + 1])
+    return Ridges(k, f, P[i, j])
+
+
+@dataclass(frozen=True)
+class SolidBranches:
+    """The analytic dispersion of a solid over wavenumbers k [rad/m]: a plate's Rayleigh-Lamb
+    branches (`lamb`), or a beam's Euler-Bernoulli branch (`flexural`, Hz)."""
+
+    k: np.ndarray
+    lamb: LambBranches | None = None
+    flexural: np.ndarray | None = None
+
+    def curves(self) -> dict[str, np.ndarray]:
+        """Each branch by name (S0, S1, ..., A0, A1, ...; EB), frequencies [Hz] over k."""
+        if self.lamb is None:
+            return {"EB": self.flexural}
+        out = {}
+        for family, rows in (("S", self.lamb.symmetric), ("A", self.lamb.antisymmetric)):
+            out.update({f"{family}{n}": rows[n] for n in range(len(rows))})
+        return out
+
+
+def solid_branches(model, k, count: int = 3) -> SolidBranches:
+    """The branches of a plate or beam: the plate's strip of width h with the plane-stress speeds
+    of its recipe's E, nu, rho (`dispersion.plane_stress_speeds`, `lamb_branches`), the beam's EI
+    and rho A as `solid.beam.build_beam` made them (`euler_bernoulli_frequency`)."""
+    r = model.recipe
+    k = np.asarray(k, float)
+    if model.kind == "beam":
+        return SolidBranches(k, flexural=euler_bernoulli_frequency(k, model.info["EI"], model.info["rhoA"]))
+    return SolidBranches(k, lamb=lamb_branches(k, r.width, plane_stress_speeds(r.E, r.nu, r.rho), count))
+
+
+# --------------------------------------------------------------------------------------------
+# all of it, on a result
+
+
+@dataclass(frozen=True)
+class Measures:
+    """An energy spectrum over the harmonics, (N, nt) [J], its moments over k <= k_max and the
+    growth law of its variance."""
+
+    energy: np.ndarray
+    moments: SpectralMoments
+    growth: PowerLaw
+
+
+@dataclass(frozen=True)
+class Wavefield:
+    """The wavefield analysis of one result (module docstring): its node lines, the spectrum
+    (amplitudes and E(k, t)) with the `kinetic` measures (moments over k <= k_max, the variance's
+    growth law over the fit window), the same `modal` measures of the modal energy spectrum
+    (`modal_spectrum`; None for a result that stores no modal state), the energy's arrival [s],
+    the kinetic energy of each band's field per unit length (bands (nb, 2) [rad/m]; density
+    (nb, N, nt) [J/m]), the frequency-wavenumber map with its ridges over k_window <= k <= k_max,
+    and the analytic branches up to `k_plot`. `kinetic_check`: the largest difference of E(k, t)
+    summed over k from the solid's kinetic energy 1/2 v'M v, relative to the latter's largest
+    value (the width's trapezoid rule against the consistent mass)."""
+
+    lines: NodeLines
+    spectrum: WavenumberSpectrum
+    kinetic: Measures
+    modal: Measures | None
+    arrival: float
+    bands: np.ndarray
+    band_density: np.ndarray
+    fk: FrequencyWavenumberMap
+    ridges: Ridges
+    branches: SolidBranches
+    k_resolved: float
+    k_window: float
+    k_plot: float
+    kinetic_check: float
+
+    @property
+    def moments(self) -> SpectralMoments:
+        return self.kinetic.moments
+
+    @property
+    def growth(self) -> PowerLaw:
+        return self.kinetic.growth
+
+
+def window_wavenumber(lines: NodeLines) -> float:
+    """Twice the main-lobe half-width 4 pi / L_w of the map's Hann window along the length
+    (L_w = N dy, the sampled length) [rad/m]: a standing wave's part running the other way then
+    lies two half-widths away from the one read, beyond its main lobe; below it a ridge's
+    wavenumber is pulled toward 0."""
+    dy = float(lines.basis.y[1] - lines.basis.y[0])
+    return 2 * 4 * np.pi / (len(lines.basis.y) * dy)
+
+
+def default_bands(k_max: float, count: int = 4) -> np.ndarray:
+    """`count` bands of equal width from 0 to k_max, (count, 2) [rad/m]."""
+    edges = np.linspace(0.0, k_max, count + 1)
+    return np.column_stack([edges[:-1], edges[1:]])
+
+
+def analyse_wavefield(ds, model, modes=None, bands=None, k_max: float | None = None, fit=None, pad: int = 4,
+                      branch_count: int = 3, progress=None, name="result") -> Wavefield:
+    """The `Wavefield` of result `ds` with solid `model` (its `modes` for a modal state). k_max:
+    the wavenumbers the moments take (default `resolved_wavenumber`); bands: (nb, 2) edges
+    [rad/m] (default 4 equal bands to k_max); fit: (t0, t_end) [s] of the growth law (default
+    from the arrival, the first output where the energy below k_max reaches 1 % of its largest,
+    to the end); the map is zero-padded `pad` times; `progress(what)` is called before each
+    stage. ValueError for a solid without a wavefield or fewer than 4 solid outputs."""
+    say = progress or (lambda what: None)
+    lines = node_lines(model)
+    t = np.asarray(ds["solid_time"].values, float)
+    if len(t) < 4:
+        raise ValueError(f"{name}: {len(t)} stored solid outputs; a wavefield needs 4 or more")
+    say("velocities on the node lines")
+    shapes = None if "solid_v" in ds else sampled_shapes(lines, modes)
+    v = sampled_velocities(ds, lines, shapes, name)
+    say("wavenumber spectrum")
+    spectrum = wavenumber_spectrum(v, lines, t)
+    k_res = resolved_wavenumber(lines)
+    k_max = k_res if k_max is None else float(k_max)
+    kinetic = spectral_moments(spectrum.k, spectrum.energy, k_max)
+    arrival = arrival_time(t, kinetic.total)
+    t0, t_end = (arrival, float(t[-1])) if fit is None else (float(fit[0]), float(fit[1]))
+
+    def measures(energy, moments):
+        return Measures(energy, moments, growth_exponent(t, moments.variance, t0, t_end))
+
+    modal = None
+    if shapes is not None:
+        energy = modal_spectrum(ds, lines, shapes)
+        modal = measures(energy, spectral_moments(spectrum.k, energy, k_max))
+    bands = default_bands(k_max) if bands is None else np.asarray(bands, float).reshape(-1, 2)
+    say("band-filtered fields")
+    density = np.stack([energy_density(band_field(spectrum, lines, lo, hi), lines) for lo, hi in bands])
+    say("frequency-wavenumber map")
+    fk = frequency_wavenumber_map(v, lines, t, pad)
+    k_window = window_wavenumber(lines)
+    ridges = map_ridges(fk, 1e-3, k_max)
+    ridges = Ridges(ridges.k[ridges.k >= k_window], ridges.f[ridges.k >= k_window], ridges.power[ridges.k >= k_window])
+    say("dispersion branches")
+    k_plot = float(min(fk.k[-1], 1.5 * k_max))
+    branches = solid_branches(model, np.linspace(0.0, k_plot, 241), branch_count)
+    check = np.nan
+    if "energy_solid_kinetic" in ds and "time" in ds:  # the solid's 1/2 v'M v, at the solid outputs
+        ke = np.interp(t, np.asarray(ds["time"].values, float), np.asarray(ds["energy_solid_kinetic"].values, float))
+        if ke.max() > 0:
+            check = float(np.max(np.abs(spectrum.energy.sum(axis=0) - ke)) / ke.max())
+    return Wavefield(lines, spectrum, measures(spectrum.energy, kinetic), modal, arrival, bands, density, fk, ridges,
+                     branches, k_res, k_window, k_plot, check)
