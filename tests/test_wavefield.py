@@ -230,6 +230,7 @@ def test_wavefield_command(runs, solid, tmp_path):
     assert code == 0, out
 
 
+@pytest.mark.slow  # a movie: ffmpeg and matplotlib, about 5 s
 def test_wavefield_movie(runs, tmp_path):
     code, out = invoke(["wavefield", runs["plate"], "-o", tmp_path / "m", "--movie", "--frames", "5"])
     assert code == 0, out
