@@ -1582,7 +1582,9 @@ def _cpu_seconds(pid: int) -> float:
         return 0.0
 
 
-LONG_RUN = ["run", "scen.toml", "--duration", "100ms", "--set", "simulation.output_every=10us", "-o", "long.nc"]
+# long enough that a signal sent at 2.5 CPU seconds (about 1 s of start-up, then the run) lands mid-run on a fast
+# machine too: uninterrupted, about 30 s of computing here (100 ms took 2.9 s and once ended before the signal)
+LONG_RUN = ["run", "scen.toml", "--duration", "1000ms", "--set", "simulation.output_every=100us", "-o", "long.nc"]
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc to see the run has started")
