@@ -19,7 +19,8 @@ their options are checked without a benchmark, a study or a cluster ever startin
 value that reaches the stand-in is a value the command failed to refuse.
 
 Most cases run in process (`typer.testing.CliRunner`) on tiny runs (the paper's interface
-against a rigid solid for 0.005 ms); FIFOs, non-UTF-8 names, signals and the full disk (a small
+against a rigid solid for 0.005 ms; for `wavefield`, which takes a plate or a beam, a short plate
+struck by one bead); FIFOs, non-UTF-8 names, signals and the full disk (a small
 tmpfs, root only) run where they must, in subprocesses. Each finding the harness made, once
 fixed, is kept as a case of its own (section 7)."""
 
@@ -173,6 +174,42 @@ metric = "peak_velocity_m_s"
 direction = "maximize"
 """
 NARROWBAND = Path(__file__).resolve().parents[1] / "scenarios" / "narrowband"
+# the cheapest plate result `granel wavefield` takes (it refuses rigid solids with exit 2): a 20 x 5 mm plate,
+# two elements across and up to 5 mm along (527 DOFs), struck by one bead. Its modes took 2.5 s on an empty
+# cache here (cached: 0 s), the paper's plate's (3584 DOFs) 16 s. Its wavenumbers are 157 rad/m apart and its
+# elements resolve 721 rad/m: each of wavefield's default four bands (up to that limit) holds one of them.
+PLATE = """name = "short-plate"
+description = "a short plate struck by one bead (the hostile harness's wavefield input)"
+
+[simulation]
+duration = "0.005ms"
+output_every = "1us"
+
+[contact]
+mu = 0.0
+alpha_n = 0.0
+
+[solid]
+kind = "plate"
+width = 0.005
+length = 0.02
+
+[solid.mesh]
+nx = 2
+max_size = 0.005
+
+[[media]]
+name = "G"
+side = "left"
+radii = [0.001]
+
+[[excitations]]
+granule = "G:1"
+kind = "half_sine"
+fmax = 50.0
+tau = "1.5us"
+direction = "toward_solid"
+"""
 
 
 def _invoke_raw(args, cwd):
@@ -193,9 +230,10 @@ def _chdir(path):
 @pytest.fixture(scope="module")
 def assets(tmp_path_factory):
     """scen.toml (the paper, rigid, 0.005 ms), beam.toml, chain.toml (+ beads.csv, force.csv),
-    nb.toml (+ chain-20.csv), sweep.toml, design.toml, plain.txt; good.nc (a run of scen.toml),
-    beam.nc, g.png and g.gif (granel's picture and movie), summary.nc (a sweep summary) and run.ckpt (a checkpoint
-    of scen.toml with --checkpoint-every 0.002ms)."""
+    nb.toml (+ chain-20.csv), sweep.toml, design.toml, plate.toml (PLATE), plain.txt; good.nc (a run
+    of scen.toml), beam.nc, plate.nc (a run of plate.toml, wavefield's input), g.png and g.gif
+    (granel's picture and movie), summary.nc (a sweep summary) and run.ckpt (a checkpoint of
+    scen.toml with --checkpoint-every 0.002ms)."""
     a = tmp_path_factory.mktemp("assets")
     (a / "scen.toml").write_text(paper_text("rigid"))
     (a / "beam.toml").write_text(paper_text("beam"))
@@ -204,10 +242,12 @@ def assets(tmp_path_factory):
     (a / "force.csv").write_text(FORCE)
     (a / "sweep.toml").write_text(SWEEP)
     (a / "design.toml").write_text(DESIGN)
+    (a / "plate.toml").write_text(PLATE)
     (a / "plain.txt").write_text("a plain file, not a folder\n")
     shutil.copy(NARROWBAND / "precompressed-chain.toml", a / "nb.toml")
     shutil.copy(NARROWBAND / "chain-20.csv", a / "chain-20.csv")
     for args in (["run", "scen.toml", "-o", "good.nc"], ["run", "beam.toml", "-o", "beam.nc"],
+                 ["run", "plate.toml", "-o", "plate.nc"],
                  ["show", "scen.toml", "-o", "g.png"], ["animate", "good.nc", "-o", "g.gif", "--frames", "2", "--fps", "5"]):
         res = _invoke_raw(args, a)
         assert res.exit_code == 0, res.output
@@ -549,6 +589,33 @@ def verify_export(folder: Path, result: Path, formats=("vtk", "xdmf", "csv", "ex
         assert text.splitlines()[0].strip() == str(ds.sizes["granule"])
 
 
+WAVEFIELD_UNITS = {"k": "rad/m", "t": "s", "f": "Hz"}  # docs/wavefield.md, the table of files
+WAVEFIELD_FIGURES = ("kt.png", "fk.png", "moments.png", "bands.png")
+
+
+def verify_wavefield(folder: Path, result: Path, frames: int | None = None) -> None:
+    """`granel wavefield`'s folder: wavefield.nc opens, with the coordinates k, t and f in their
+    units (their attributes), a finite E(k, t) >= 0 (`energy`, a sum of squares) at each of the
+    result's solid outputs; its four figures open as pictures; with `frames` (--movie) the movie,
+    bands.mp4 or the GIF it falls back to, holds at most that many frames."""
+    ds = xr.load_dataset(folder / "wavefield.nc", engine="h5netcdf")
+    for name, units in WAVEFIELD_UNITS.items():
+        assert name in ds.coords, f"{folder}/wavefield.nc: no coordinate {name}"
+        assert ds[name].attrs.get("units") == units, f"{folder}/wavefield.nc: {name} in {ds[name].attrs.get('units')!r}"
+    energy = ds["energy"]
+    assert energy.dims == ("k", "t"), f"{folder}/wavefield.nc: energy over {energy.dims}"
+    assert np.isfinite(energy.values).all() and (energy.values >= 0).all(), \
+        f"{folder}/wavefield.nc: E(k, t) is not finite and >= 0"
+    times = xr.load_dataset(result, engine="h5netcdf")["solid_time"].values
+    assert np.array_equal(ds["t"].values, times), \
+        f"{folder}/wavefield.nc: {ds.sizes['t']} times, the result has {len(times)} solid outputs"
+    for name in WAVEFIELD_FIGURES:
+        verify_picture(folder / name)
+    if frames is not None:
+        movie = folder / "bands.mp4"
+        verify_movie(movie if movie.exists() else movie.with_suffix(".gif"), frames)
+
+
 def verify_modes_json(stdout: str, count: int) -> None:
     data = json.loads(stdout)
     periods = np.array(data["periods_ms"])
@@ -650,6 +717,12 @@ def base(command: str) -> Base:
             fmts = _options(extra).get("--format", "csv")
             verify_export(box / "exp", box / "good.nc", fmts.split(","))
         return Base(["export", "good.nc", "-o", "exp", "--format", "csv"], ["exp"], check)
+    if command == "wavefield":
+        def check(box, o, extra):
+            opts = _options(extra)
+            frames = int(opts.get("--frames", 120)) if "--movie" in opts else None
+            verify_wavefield(box / "wf", box / "plate.nc", frames)
+        return Base(["wavefield", "plate.nc", "-o", "wf"], ["wf"], check)
     if command == "map":
         return Base(["map", "summary.nc", "-o", "map.png", "--metric", "peak_velocity_m_s"], ["map.png"],
                     lambda box, o, e: verify_picture(box / "map.png"))
@@ -717,6 +790,11 @@ def _all(*groups):
 COUNTS = _all(ZERO, NEGATIVE, NONFINITE, HUGE, TINY, WRONG)  # a whole number >= 1 refuses these
 POSITIVE = _all(ZERO, NEGATIVE, NONFINITE, WRONG)  # a finite number > 0 refuses these
 
+WAVEFIELD_BANDS = ["3", "0,1e300", "12", "5,3", "0,0", "-1,200", "0,nan", "0,inf", "1,,2", "0,", ",",
+                   "0;200", "0,1e-300", "1e-300,2e-300", "1e300,1e301", ",".join(str(100 * k) for k in range(14))]
+WAVEFIELD_FITS = ["1us:4us", "2us:4us", "0:1e-300", "1ms:2ms", "0:1e300", "4us:1us", "0ms:0ms",
+                  "nan:1ms", "0:inf", "-1us:3us", "1us:2us:3us", ":", "a:b", "1us:", "0.1ms"]
+
 # (command, option): (values to try, the values that must be refused)
 OPTIONS = {
     ("run", "--shock"): (NUMBERS, _all(NONFINITE, WRONG, HUGE, HUGE_INT, ["-1e300"])),  # 0, -1: no or a reversed shock
@@ -763,6 +841,18 @@ OPTIONS = {
     ("map", "--x"): (WORDS, _all(WORDS)),
     ("map", "--y"): (WORDS, _all(WORDS)),
     ("init", "NAME"): (WORDS + ["/abs", ".hidden", "a" * 300], {"", " ", "../x", "/abs", ".hidden"}),
+    # wavefield on plate.nc (PLATE: wavenumbers every 157 rad/m, up to 6597; the default k_max 721 rad/m). --bands:
+    # 1 to 12 bands or ascending edges >= 0, each band holding one of the result's wavenumbers (12 equal bands
+    # up to 721 rad/m are 60 rad/m wide: the first holds none); --k-max: a positive number reaching the result's
+    # second wavenumber (314 rad/m), its equal bands each holding one; --fit: START:END within the record, holding
+    # 3 or more of its solid outputs (0, 1, ..., 5 us); --frames, --fps as animate's (with --movie)
+    ("wavefield", "--bands"): (NUMBERS + WAVEFIELD_BANDS,
+                               _all(NUMBERS) | (set(WAVEFIELD_BANDS) - {"3", "0,1e300"})),
+    ("wavefield", "--k-max"): (NUMBERS + ["200", "320", "2000"], _all(NUMBERS) | {"200", "320"}),
+    ("wavefield", "--fit"): (NUMBERS + WAVEFIELD_FITS,
+                             _all(NUMBERS) | (set(WAVEFIELD_FITS) - {"1us:4us"})),
+    ("wavefield", "--frames"): (NUMBERS, COUNTS),
+    ("wavefield", "--fps"): (NUMBERS, _all(COUNTS, HUGE_INT)),
 }
 
 # (command, field, value) that once ended in an internal error while building or running (findings
@@ -780,6 +870,8 @@ def _option_case(command, option, value):
     if option == "NAME":  # init's argument
         b = Base(["init", value, "-o", "new.toml"], ["new.toml"], lambda box, o, e: verify_scenario_file(box / "new.toml"))
         return b, []
+    if command == "wavefield" and option in ("--frames", "--fps"):
+        return b, ["--movie", option, value]  # the movie's options, with the movie
     return b, [option, value]
 
 
@@ -912,6 +1004,8 @@ def _input_role(role: str, p, kind: str = "") -> Base:
     if role == "map summary":
         return Base(["map", p, "-o", "map.png", "--metric", "peak_velocity_m_s"], ["map.png"],
                     lambda box, o, e: verify_picture(Path("map.png")))
+    if role == "wavefield result":
+        return Base(["wavefield", p, "-o", "wf"], ["wf"], lambda box, o, e: verify_wavefield(Path("wf"), Path(f)))
     if role == "sweep file":
         return Base(["sweep", p, "-o", "sout"], ["sout"], long_work=True)
     if role == "design file":
@@ -941,9 +1035,9 @@ def _input_role(role: str, p, kind: str = "") -> Base:
 # role: the valid input it reads (in the case folder)
 INPUT_ROLES = {"run scenario": "scen.toml", "show scenario": "scen.toml", "modes scenario": "beam.toml",
                "reciprocity scenario": "scen.toml", "animate result": "good.nc", "export result": "good.nc",
-               "map summary": "summary.nc", "sweep file": "sweep.toml", "design file": "design.toml",
-               "spectrum scenario": "nb.toml", "run --resume": "run.ckpt", "granules_file": "beads.csv",
-               "table file": "force.csv"}
+               "map summary": "summary.nc", "wavefield result": "plate.nc", "sweep file": "sweep.toml",
+               "design file": "design.toml", "spectrum scenario": "nb.toml", "run --resume": "run.ckpt",
+               "granules_file": "beads.csv", "table file": "force.csv"}
 # kind: the exit codes reading.py documents (0: the input is read as the valid one)
 INPUT_KINDS = {"missing": {2}, "folder": {4}, "under_file": {2}, "dangling": {2}, "long": {2}, "device": {4},
                "symlink": {0}, "readonly": {0}, "unreadable": {0, 4}, "fifo": {4}, "fifo (process)": {4}, "non_utf8": {0}}
@@ -953,14 +1047,17 @@ SUBPROCESS_KINDS = {"non_utf8", "fifo (process)"}
 # the subprocess cases of the quick suite (each takes 1-6 s); the others are marked slow
 QUICK_PROCESS = {("run scenario", "non_utf8"), ("run scenario", "fifo (process)"), ("granules_file", "non_utf8"),
                  ("export -o", "non_utf8")}
-# in-process cases that end in a whole run (0.3-2 s each) and repeat what another case shows, slow
+# in-process cases that end in a whole run (0.3-2 s each; a wavefield 2 s) and repeat what another case shows, slow
 SLOW_IN_PROCESS = {(r, k) for r in ("show scenario", "modes scenario", "reciprocity scenario", "export result",
-                                    "map summary", "table file", "sweep file", "design file", "spectrum scenario")
+                                    "map summary", "wavefield result", "table file", "sweep file", "design file",
+                                    "spectrum scenario")
                    for k in ("readonly", "unreadable")} | {
     (r, "unreadable") for r in INPUT_ROLES if IS_ROOT} | {  # root reads it anyway: as "readonly"
     (r, "readonly_dir") for r in ("show -o", "modes --plot", "init -o", "animate -o", "map -o", "spectrum -o",
-                                  "export -o", "reciprocity --out", "sweep --out", "paper --out", "design -o")} | {
-    ("reciprocity --out", "empty_folder"), ("modes --plot", "dangling")}  # as reciprocity-symlink, modes-own
+                                  "export -o", "wavefield -o", "reciprocity --out", "sweep --out", "paper --out",
+                                  "design -o")} | {
+    ("reciprocity --out", "empty_folder"), ("modes --plot", "dangling")} | {  # as reciprocity-symlink, modes-own
+    ("wavefield result", "symlink"), ("wavefield -o", "empty_folder")}  # as the wavefield of F21: an exit 0, confirmed
 
 
 def hostile_input(box: Path, kind: str, valid: str):
@@ -1035,8 +1132,8 @@ def test_hostile_input_paths(assets, role, kind):
 
 
 def _process_cases():
-    for role in ["run scenario", "show scenario", "animate result", "export result", "map summary", "sweep file",
-                 "design file", "spectrum scenario", "run --resume", "granules_file", "table file"]:
+    for role in ["run scenario", "show scenario", "animate result", "export result", "map summary", "wavefield result",
+                 "sweep file", "design file", "spectrum scenario", "run --resume", "granules_file", "table file"]:
         for kind in sorted(SUBPROCESS_KINDS):
             marks = _slow_if((role, kind) not in QUICK_PROCESS)
             yield pytest.param(role, kind, marks=marks, id=f"{role}-{kind}")
@@ -1103,6 +1200,9 @@ def _output_role(role: str, p):
     if role == "export -o":
         return Base(["export", "good.nc", "-o", p, "--format", "csv"], [p],
                     lambda box, o, e: verify_export(Path(f), Path("good.nc"), ["csv"])), "good.nc", True
+    if role == "wavefield -o":
+        return Base(["wavefield", "plate.nc", "-o", p], [p],
+                    lambda box, o, e: verify_wavefield(Path(f), Path("plate.nc"))), "plate.nc", True
     if role == "reciprocity --out":
         return Base(["reciprocity", "scen.toml", "--solid", "rigid", "--duration", "0.005ms", "--out", p], [p],
                     lambda box, o, e: verify_reciprocity(Path(f), "scen.toml", "rigid", "0.005ms", [], "strong")), \
@@ -1117,8 +1217,8 @@ def _output_role(role: str, p):
 
 
 OUTPUT_SUFFIX = {"run -o": ".nc", "show -o": ".png", "modes --plot": ".png", "init -o": ".toml", "animate -o": ".gif",
-                 "map -o": ".png", "spectrum -o": ".nc", "export -o": "", "reciprocity --out": "", "sweep --out": "",
-                 "paper --out": "", "design -o": ""}
+                 "map -o": ".png", "spectrum -o": ".nc", "export -o": "", "wavefield -o": "", "reciprocity --out": "",
+                 "sweep --out": "", "paper --out": "", "design -o": ""}
 OWN = {".nc": "good.nc", ".png": "g.png", ".gif": "g.gif", ".toml": None}  # a file granel wrote, by suffix
 # kind: the exit codes the output rules (guard.outputs) give; None: any code of the contract
 FILE_KINDS = {"folder": {2}, "foreign": {2}, "readonly_own": {2}, "own": {0}, "under_file": {2}, "symlink_to_input": {2},
@@ -1229,7 +1329,8 @@ def test_hostile_output_paths_in_a_process(assets, readonly_fs, role, kind):
 
 TEXT_READERS = {"run scenario": "scen.toml", "granules_file": "beads.csv", "table file": "force.csv",
                 "sweep file": "sweep.toml", "design file": "design.toml", "spectrum scenario": "nb.toml"}
-RESULT_READERS = {"animate result": "good.nc", "export result": "good.nc", "map summary": "summary.nc"}
+RESULT_READERS = {"animate result": "good.nc", "export result": "good.nc", "map summary": "summary.nc",
+                  "wavefield result": "plate.nc"}
 CONTENT_KINDS = {
     "run scenario": ["empty", "truncated", "binary", "netcdf", "nul"],
     "granules_file": ["empty", "truncated", "binary", "netcdf", "wrong_columns", "extra_column", "header_only"],
@@ -1240,9 +1341,15 @@ CONTENT_KINDS = {
     "animate result": ["empty", "truncated", "binary", "text", "other_kind", "dropped", "transposed", "nan"],
     "export result": ["empty", "truncated", "binary", "text", "other_kind", "dropped", "transposed", "nan"],
     "map summary": ["empty", "truncated", "binary", "text", "other_kind", "dropped", "transposed", "nan"],
+    # and a result wavefield refuses as it is: a rigid solid's, one of 3 solid outputs (it needs 4)
+    "wavefield result": ["empty", "truncated", "binary", "text", "other_kind", "dropped", "transposed", "nan", "rigid",
+                         "short"],
     "run --resume": ["empty", "truncated", "binary", "netcdf", "flipped"],
 }
 BINARY = bytes(range(256)) * 4
+# the variable a damage drops and the one it transposes or fills with NaN, by the file it damages
+DROPPED = {"good.nc": "x", "summary.nc": "status", "plate.nc": "solid_eta_dot"}
+DAMAGED = {"good.nc": "x", "summary.nc": "peak_velocity_m_s", "plate.nc": "solid_eta_dot"}
 
 
 def damage(box: Path, role: str, kind: str) -> str:
@@ -1276,13 +1383,17 @@ def damage(box: Path, role: str, kind: str) -> str:
         path.write_bytes(bytes(b))
     elif kind == "other_kind":  # a sweep summary given for a result, a result for a summary
         path.write_bytes((box / ("good.nc" if valid == "summary.nc" else "summary.nc")).read_bytes())
-    elif kind in ("dropped", "transposed", "nan"):
+    elif kind == "rigid":  # a rigid solid's result for a plate's
+        path.write_bytes((box / "good.nc").read_bytes())
+    elif kind in ("dropped", "transposed", "nan", "short"):
         from granel.io.results import write_netcdf
 
         ds = xr.load_dataset(path, engine="h5netcdf")
-        var = "x" if valid == "good.nc" else "peak_velocity_m_s"
-        if kind == "dropped":
-            ds = ds.drop_vars(var if valid == "good.nc" else "status")
+        var = DAMAGED[valid]
+        if kind == "short":
+            ds = ds.isel(solid_time=slice(0, 3))
+        elif kind == "dropped":
+            ds = ds.drop_vars(DROPPED[valid])
         elif kind == "transposed":
             ds[var] = ds[var].transpose(*reversed(ds[var].dims))
         else:
@@ -1294,10 +1405,14 @@ def damage(box: Path, role: str, kind: str) -> str:
     return valid
 
 
+# a damaged plate result that run.load_result refuses as it refuses animate's and export's (0.5 s each), slow
+SLOW_CONTENT = {("wavefield result", k) for k in ("dropped", "transposed", "nan")}
+
+
 def _content_cases():
     for role, kinds in CONTENT_KINDS.items():
         for kind in kinds:
-            yield pytest.param(role, kind, id=f"{role}-{kind}")
+            yield pytest.param(role, kind, id=f"{role}-{kind}", marks=_slow_if((role, kind) in SLOW_CONTENT))
 
 
 @pytest.mark.parametrize("role,kind", list(_content_cases()))
@@ -1495,6 +1610,9 @@ def _disk_base(command: str, out: str) -> Base:
                     lambda box, o, e: verify_movie(Path(out), 3))
     if command == "export":
         return Base(["export", "good.nc", "-o", out], [out], lambda box, o, e: verify_export(Path(out), Path("good.nc")))
+    if command == "wavefield":
+        return Base(["wavefield", "plate.nc", "-o", out], [out],
+                    lambda box, o, e: verify_wavefield(Path(out), Path("plate.nc")))
     if command == "sweep":
         return Base(["sweep", "sweep.toml", "-o", out, "--workers", "1"], [out],
                     lambda box, o, e: verify_summary(Path(out) / "summary.nc", 2))
@@ -1506,13 +1624,14 @@ def verify_summary(path: Path, cases: int) -> None:
     assert ds["status"].size == cases and all(str(s) == "ok" for s in ds["status"].values.ravel())
 
 
-DISK_OUT = {"run": "disk/out.nc", "show": "disk/g.png", "animate": "disk/m.gif", "export": "disk/exp", "sweep": "disk/sout"}
+DISK_OUT = {"run": "disk/out.nc", "show": "disk/g.png", "animate": "disk/m.gif", "export": "disk/exp",
+            "wavefield": "disk/wf", "sweep": "disk/sout"}
 
 
 def _disk_cases():
     for command in DISK_OUT:
         for free in (0, 16 * 1024, 64 * 1024, 160 * 1024):
-            marks = _slow_if(command == "sweep" and free != 0)
+            marks = _slow_if(command in ("sweep", "wavefield") and free != 0)
             yield pytest.param(command, free, id=f"{command}-{free // 1024}k", marks=marks)
 
 
@@ -1680,6 +1799,103 @@ def test_reciprocity_does_not_ignore_a_set_fmax(assets):
         for name in ("shock-LSGM3.nc", "shock-SSGMC.nc"):
             ds = xr.load_dataset(box / "rec" / name, engine="h5netcdf")
             assert tomllib.loads(ds.attrs["scenario"])["excitations"][0]["fmax"] == 200.0
+    finally:
+        _release(box)
+
+
+# findings on `granel wavefield` (plate.nc: wavenumbers 157, 314, ... rad/m; solid outputs 0, 1, ..., 5 us), each
+# now a refusal naming the option, before the output folder is made. F15: a --k-max below the result's second
+# wavenumber (under the first: an internal error drawing kt.png; between: exit 0 with NaN moments). F16: a band
+# holding none of the result's wavenumbers, given or equal bands up to --k-max (exit 0, the band's field zero by
+# construction). F17: a --fit window past the record (exit 0, the moments figure's time axis to 1e303 ms) or
+# holding fewer than the 3 solid outputs a fit needs (exit 0 with NaN exponents).
+WAVEFIELD_OPTION_FINDINGS = [("F15", "--k-max", "1e-300"), ("F15", "--k-max", "200"), ("F16", "--bands", "0,1e-300"),
+                             ("F16", "--k-max", "1e300"), ("F16", "--bands", "12"), ("F17", "--fit", "0:1e300"),
+                             ("F17", "--fit", "2us:4us")]
+
+
+@pytest.mark.parametrize("finding,option,value", [pytest.param(*c, id=f"{c[0]}: {c[1]} {c[2]}")
+                                                  for c in WAVEFIELD_OPTION_FINDINGS])
+def test_wavefield_refuses_what_its_result_cannot_serve(assets, finding, option, value):
+    box = new_box(assets)
+    try:
+        check_case(box, base("wavefield"), [option, value], refuse=True, names=(option,))
+        assert not (box / "wf").exists(), "a refused wavefield made its folder"
+    finally:
+        _release(box)
+
+
+# F18: a plate result whose solid_time is not finite and increasing, lies outside its run, or comes without the
+# solid's state (internal errors: pcolormesh's, an IndexError, an AttributeError); F19: a result whose mode_omega
+# are not its solid's frequencies (here off by 1e-5, ten times the check's tolerance: exit 0 with a modal energy
+# spectrum of the wrong frequencies); F22 (of the fuzz): a modal velocity finite but far beyond any run's (a flipped
+# byte), whose energies overflow float32 in wavefield.nc (exit 0 with E(k, t) = inf). Each now a refusal naming
+# the file, F18 and F19 before the folder is made, F22 once the spectrum is computed.
+WAVEFIELD_DAMAGE = {
+    "F18: solid_time not finite": lambda ds, t: ds.assign_coords(solid_time=np.where(t == t[2], np.nan, t)),
+    "F18: solid_time decreasing": lambda ds, t: ds.assign_coords(solid_time=t[::-1].copy()),
+    "F18: solid_time beyond the run": lambda ds, t: ds.assign_coords(solid_time=t * 1e300),
+    "F18: solid_time without a state": lambda ds, t: ds.drop_vars(["solid_eta", "solid_eta_dot", "mode_omega"]),
+    "F19: mode_omega not the solid's": lambda ds, t: ds.assign(mode_omega=ds["mode_omega"] * (1 + 1e-5)),
+    "F22: a modal velocity of 1e30": lambda ds, t: ds.assign(solid_eta_dot=ds["solid_eta_dot"].where(
+        (ds["solid_time"] < t[-1]) | (ds["mode"] > 0), np.float32(1e30))),
+}
+
+
+@pytest.mark.parametrize("damage", list(WAVEFIELD_DAMAGE))
+def test_wavefield_refuses_a_damaged_plate_result(assets, damage):
+    from granel.io.results import write_netcdf
+
+    box = new_box(assets)
+    try:
+        ds = xr.load_dataset(box / "plate.nc", engine="h5netcdf")
+        (box / "plate.nc").unlink()
+        write_netcdf(WAVEFIELD_DAMAGE[damage](ds, ds["solid_time"].values), box / "plate.nc")
+        o = check_case(box, base("wavefield"), refuse=True, names=("plate.nc",))
+        assert "damaged result" in o.error, o
+        assert damage.startswith("F22") or not (box / "wf").exists(), "a refused wavefield made its folder"
+    finally:
+        _release(box)
+
+
+@pytest.mark.parametrize("args,given", [(["wavefield", "plate.nc", "-o", "wf", "--fit", "a:b"], "--fit a:b:"),
+                                        (["wavefield", "x:smile:.nc", "-o", "wf"], "x:smile:.nc")])
+def test_the_error_line_quotes_what_was_given(assets, args, given):
+    """A value or a name holding an emoji code (":b:", ":smile:") is quoted as given (finding F20:
+    the console printed the emoji in its place)."""
+    box = new_box(assets)
+    try:
+        o = invoke(box, args, ["wf"])
+        assert o.code == 2 and given in o.error, o
+    finally:
+        _release(box)
+
+
+def test_wavefield_of_a_name_that_is_not_utf8(assets):
+    """A result whose name is not UTF-8: its wavefield, confirmed (finding F21: the name, in the
+    figures' titles, stopped matplotlib's font with an internal error, and in the table's title an
+    output that takes only UTF-8, as the in-process runner's does; it is now escaped there and in
+    wavefield.nc's `source`, as `guard.writing.storable` does)."""
+    box = new_box(assets)
+    try:
+        name = os.fsdecode(b"\xff\xfe-plate.nc")
+        shutil.copy(box / "plate.nc", box / name)
+        o = invoke(box, ["wavefield", name, "-o", "wf"], ["wf"])
+        assert o.code == 0, o
+        with _chdir(box):
+            verify_wavefield(Path("wf"), Path(name))
+        assert xr.load_dataset(box / "wf" / "wavefield.nc", engine="h5netcdf").attrs["source"] == "\\xff\\xfe-plate.nc"
+    finally:
+        _release(box)
+
+
+@pytest.mark.slow  # a movie: matplotlib frames and ffmpeg, about 3 s
+def test_wavefield_movie(assets):
+    """`--movie`: the wavefield's files and the movie, confirmed (`verify_wavefield`)."""
+    box = new_box(assets)
+    try:
+        o = check_case(box, base("wavefield"), ["--movie", "--frames", "3", "--fps", "5"])
+        assert o.code == 0, o
     finally:
         _release(box)
 

@@ -896,6 +896,7 @@ def wavefield(
     from .guard.exits import InputError
     from .guard.outputs import OutputPlan
     from .guard.reading import check_file
+    from .guard.writing import storable
     from .io.results import ResultFileError
     from .studies.wavefield import (FILES, MOVIE, WavefieldOptions, check_options, parse_bands, parse_window,
                                     plan_wavefield, read_wavefield_result, stage_count, wavefield_study)
@@ -935,7 +936,7 @@ def wavefield(
                                      name=result, plan=settled)
     except OSError as e:
         _fail(f"-o {out}: cannot write the wavefield ({e})", 4)
-    t = Table(show_header=False, title=f"granel wavefield: {result.name}")
+    t = Table(show_header=False, title=f"granel wavefield: {storable(result.name)}")  # stdout may take only UTF-8
     t.add_row("variance growth exponent", f"kinetic {report.exponent:.3f} +- {report.stderr:.3f}, modal "
               f"{report.modal_exponent:.3f} +- {report.modal_stderr:.3f} (fit over {report.fit[0] * 1e3:.4f}-"
               f"{report.fit[1] * 1e3:.4f} ms)")

@@ -51,15 +51,15 @@ def one_line(text: str) -> str:
 
 
 def error(message: str) -> None:
-    console.print(f"[bold red]error:[/] {escape(one_line(message))}")
+    console.print(f"[bold red]error:[/] {escape(one_line(message))}", emoji=False)  # "a:b:" stays as given
 
 
 def note(message: str) -> None:
-    console.print(f"[yellow]note:[/] {escape(one_line(message))}")
+    console.print(f"[yellow]note:[/] {escape(one_line(message))}", emoji=False)
 
 
 def _warning(message, category, filename, lineno, file=None, line=None):
-    console.print(f"[yellow]warning:[/] {escape(one_line(str(message)))}")
+    console.print(f"[yellow]warning:[/] {escape(one_line(str(message)))}", emoji=False)
 
 
 def _usage_message(e: UsageError) -> str:

@@ -105,21 +105,61 @@ def read_wavefield_result(path) -> "xr.Dataset":
                          "(run with --solid plate or --solid beam)")
     if "solid_time" not in ds or ds.sizes.get("solid_time", 0) < 4:
         raise InputError(f"{path}: {ds.sizes.get('solid_time', 0)} stored solid outputs; a wavefield needs 4 or more")
+    if "solid_eta_dot" not in ds and "solid_v" not in ds:
+        raise InputError(f"{path}: damaged result (solid_time without the solid's state: no solid_eta_dot or solid_v)")
+    ts, t = np.asarray(ds["solid_time"].values, float), np.asarray(ds["time"].values, float)
+    if not np.all(np.isfinite(ts)) or np.any(np.diff(ts) <= 0):
+        raise InputError(f"{path}: damaged result (its solid output times, solid_time, are not finite and increasing)")
+    # the two time axes are accumulated apart: a 5 us run stores 5e-06 s and 4.9999999999999996e-06 s as its
+    # last outputs; 1e-9 of the run's span is far above such rounding and far below an output interval
+    slack = 1e-9 * max(t[-1] - t[0], abs(t[-1]))
+    if ts[0] < t[0] - slack or ts[-1] > t[-1] + slack:
+        raise InputError(f"{path}: damaged result (its solid outputs, {ts[0]:.6g}-{ts[-1]:.6g} s, lie outside its run, "
+                         f"{t[0]:.6g}-{t[-1]:.6g} s)")
     return ds
 
 
-def resolve_bands(options: WavefieldOptions, k_max: float, k_top: float, name) -> np.ndarray:
+def resolve_bands(options: WavefieldOptions, k_max: float, k, name) -> np.ndarray:
     """The bands' edges (nb, 2) [rad/m]: equal bands up to k_max, or the edges given; InputError
-    if the edges given start at or beyond the record's largest wavenumber k_top."""
+    if the edges given start at or beyond the record's largest wavenumber, or if a band holds none
+    of the record's wavenumbers `k` (k_lo <= k < k_hi, as `analysis.wavefield.band_field` takes
+    them: its field and energy would be zero by construction)."""
     from ..analysis.wavefield import default_bands
 
+    k = np.asarray(k, float)
     if isinstance(options.bands, int):
-        return default_bands(k_max, options.bands)
-    e = np.asarray(options.bands, float)
-    if e[0] >= k_top:
-        raise InputError(f"--bands {','.join(f'{x:g}' for x in e)}: {name} holds wavenumbers up to {k_top:.4g} rad/m; "
-                         "give edges below that")
-    return np.column_stack([e[:-1], e[1:]])
+        bands = default_bands(k_max, options.bands)
+        upto = f"--k-max {k_max:.4g} rad/m" if options.k_max is not None else \
+            f"the default --k-max, the elements' resolution limit {k_max:.4g} rad/m"
+        given, remedy = f"--bands {options.bands} (equal bands up to {upto})", "give fewer bands or a larger --k-max"
+    else:
+        e = np.asarray(options.bands, float)
+        given, remedy = f"--bands {','.join(f'{x:g}' for x in e)}", "give wider bands"
+        if e[0] >= k[-1]:
+            raise InputError(f"{given}: {name} holds wavenumbers up to {k[-1]:.4g} rad/m; give edges below that")
+        bands = np.column_stack([e[:-1], e[1:]])
+    for lo, hi in bands:
+        if not np.any((k >= lo) & (k < hi)):
+            raise InputError(f"{given}: the band {lo:.4g}-{hi:.4g} rad/m holds none of {name}'s wavenumbers "
+                             f"({k[0]:.4g}, {k[1]:.4g}, ..., {k[-1]:.4g} rad/m); {remedy}")
+    return bands
+
+
+def check_window(options: WavefieldOptions, t, name) -> None:
+    """InputError naming --fit unless its window (START, END] lies within the record's solid
+    outputs `t` [s] (END at most half an output interval after the last: a time that rounds to
+    it) and holds the 3 outputs `analysis.wavefield.growth_exponent` needs for a fit."""
+    if options.fit is None:
+        return
+    t = np.asarray(t, float)
+    t0, t1 = options.fit
+    given = f"--fit {t0 * 1e3:.6g}ms:{t1 * 1e3:.6g}ms"
+    if t1 > t[-1] + 0.5 * (t[-1] - t[-2]):
+        raise InputError(f"{given}: END is after {name}'s last solid output at {t[-1] * 1e3:.6g} ms")
+    inside = int(np.count_nonzero((t > t0) & (t <= t1)))
+    if inside < 3:
+        raise InputError(f"{given}: the window holds {inside} of {name}'s solid outputs ({t[0] * 1e3:.6g}-"
+                         f"{t[-1] * 1e3:.6g} ms); the growth law needs 3 or more")
 
 
 @dataclass(frozen=True)
@@ -218,7 +258,8 @@ class WavefieldPlan:
 
 def plan_wavefield(ds, options: WavefieldOptions, name="result") -> WavefieldPlan:
     """The solid of result `ds` (`analysis.result_model.result_solid`: exit 2 if it cannot be
-    built), its node lines and the bands, checked against its wavenumbers (InputError, exit 2)."""
+    built), its node lines and the bands, checked against its wavenumbers, k_max against its
+    first two and the fit window against its solid outputs (InputError naming the option, exit 2)."""
     from ..analysis.result_model import result_solid
     from ..analysis.wavefield import node_lines, resolved_wavenumber
 
@@ -228,7 +269,21 @@ def plan_wavefield(ds, options: WavefieldOptions, name="result") -> WavefieldPla
     except ValueError as e:
         raise InputError(f"{name}: {e}") from None
     k_max = options.k_max if options.k_max is not None else resolved_wavenumber(lines)
-    return WavefieldPlan(model, lines, float(k_max), resolve_bands(options, k_max, float(lines.basis.k[-1]), name))
+    k = lines.basis.k
+    if np.count_nonzero(k <= k_max) < 2:  # one wavenumber: variance and entropy 0 whatever the field
+        default = "" if options.k_max is not None else " (the default, the elements' resolution limit)"
+        raise InputError(f"--k-max {k_max:.4g}{default}: the moments need 2 or more of {name}'s wavenumbers, and its "
+                         f"first two are {k[0]:.4g} and {k[1]:.4g} rad/m; give --k-max {k[1]:.4g} or more")
+    check_window(options, ds["solid_time"].values, name)
+    if "mode_omega" in ds:  # the modal energy takes the stored frequencies with the solid's own shapes
+        from ..analysis.result_model import result_modes
+
+        stored, own = np.asarray(ds["mode_omega"].values, float), np.asarray(result_modes(ds, name).omega, float)
+        # the run stored its modes' frequencies: a new eigen-solve gave them bit for bit on the paper's plate, and
+        # LAPACK's rounding elsewhere is about eps (w_max / w_min)^2 relative, 5e-9 there (w_max / w_min = 4616)
+        if stored.shape != own.shape or not np.allclose(stored, own, rtol=1e-6, atol=0.0):
+            raise InputError(f"{name}: damaged result (its mode_omega are not the modal frequencies of its solid)")
+    return WavefieldPlan(model, lines, float(k_max), resolve_bands(options, k_max, k, name))
 
 
 def stage_count(options: WavefieldOptions) -> int:
@@ -242,7 +297,7 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
     with `options.movie`. progress(what, done, total) before each stage (`stage_count`)."""
     from ..analysis.result_model import result_modes
     from ..analysis.wavefield import analyse_wavefield
-    from ..guard.writing import save_figure
+    from ..guard.writing import save_figure, storable
     from ..io.results import write_netcdf
     from ..viz import wavefield as V
 
@@ -258,10 +313,18 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
     plan = plan or plan_wavefield(ds, options, name)
     modes = result_modes(ds, name) if "solid_eta" in ds else None
     wf = analyse_wavefield(ds, plan.model, modes, plan.bands, plan.k_max, options.fit, progress=say, name=name)
+    top = float(np.finfo(np.float32).max)  # wavefield.nc holds these in float32 (`wavefield_dataset`)
+    held = [("E(k, t)", wf.spectrum.energy_line), ("the band fields' energy", wf.band_density),
+            ("the map", wf.fk.power)]
+    for what, values in held + ([("the modal energy", wf.modal.energy)] if wf.modal is not None else []):
+        if not np.all(np.abs(values) <= top):  # NaN and inf fail it too
+            raise InputError(f"{name}: damaged result (its solid state gives {what} beyond {top:.3g}, float32's "
+                             "largest, or not finite)")
     out = Path(out)
-    title = f"{Path(str(name)).name} ({wf.lines.kind})"
+    shown = storable(str(name))  # a name that is not UTF-8 with its bytes escaped: fonts and HDF5 take only text
+    title = f"{Path(shown).name} ({wf.lines.kind})"
     say("wavefield.nc")
-    write_netcdf(wavefield_dataset(wf, str(name)), out / "wavefield.nc")
+    write_netcdf(wavefield_dataset(wf, shown), out / "wavefield.nc")
     files = [out / "wavefield.nc"]
     for file, figure in (("kt.png", V.kt_figure), ("fk.png", V.fk_figure), ("moments.png", V.moments_figure),
                          ("bands.png", V.bands_figure)):
