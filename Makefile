@@ -21,9 +21,13 @@ docs: install
 	$(BIN)/python -m pip install --quiet -e '.[docs]'
 	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
 
+# one run into demo-out/, then the whole paper into its own folder demo-out/paper/ (a command's
+# output folder holds only what that command writes); a second `make demo` replaces the run and
+# reuses the paper's stored runs
 demo: install
 	$(BIN)/granel run paper --solid rigid --excite LSGM:3 --shock strong -o demo-out/paper-rigid-LSGM3-strong.nc
-	$(BIN)/granel paper --out demo-out
+	$(BIN)/granel paper --out demo-out/paper
+	@echo "make demo: open demo-out/paper/report.md"
 
 test: install
 	$(BIN)/python -m pytest -q -m "not slow"
@@ -73,4 +77,4 @@ bench: install
 	$(BIN)/python benchmarks/bench_scaling.py
 
 clean:
-	rm -rf $(VENV) .venv-python3.* demo-out .pytest_cache
+	rm -rf $(VENV) .venv-python3.* .venv-user demo-out .pytest_cache

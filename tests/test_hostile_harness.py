@@ -22,7 +22,10 @@ Most cases run in process (`typer.testing.CliRunner`) on tiny runs (the paper's 
 against a rigid solid for 0.005 ms; for `wavefield`, which takes a plate or a beam, a short plate
 struck by one bead); FIFOs, non-UTF-8 names, signals and the full disk (a small
 tmpfs, root only) run where they must, in subprocesses. Each finding the harness made, once
-fixed, is kept as a case of its own (section 7)."""
+fixed, is kept as a case of its own (section 7). Hostile environments (section 8: cache folders
+that cannot be used, TMPDIR, HOME, the terminal's size, an ASCII locale with non-ASCII names, a
+umask, limits on open files and file size, a clock or files dated far off) meet every command in
+a process, under the same contract."""
 
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import contextlib
 import hashlib
 import json
 import os
+import resource
 import shlex
 import shutil
 import signal
@@ -39,7 +43,7 @@ import sys
 import tempfile
 import time
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +55,7 @@ from typer.testing import CliRunner
 
 import granel
 import granel.studies.benchmark
-import granel.studies.design
+import granel.studies.design_search
 import granel.studies.paper
 import granel.studies.sweep
 from granel import scenario as S
@@ -84,7 +88,7 @@ CALLS: list = []
 ORIGINAL: dict = {}
 LIVE: set = set()  # stand-ins that call the real engine (the full-disk sweep)
 STAND_INS = [(granel.studies.benchmark, "run_bench"), (granel.studies.paper, "paper_study"), (granel.studies.sweep, "run_sweep"),
-             (granel.studies.sweep, "run_spec"), (granel.studies.design, "run_design")]
+             (granel.studies.sweep, "run_spec"), (granel.studies.design_search, "run_design")]
 
 
 def _stand_in(name):
@@ -314,8 +318,11 @@ def snapshot(root: Path) -> dict:
             if stat.S_ISLNK(s.st_mode):
                 out[p] = ("link", os.readlink(p))
             elif stat.S_ISREG(s.st_mode):
-                with open(p, "rb") as fh:
-                    digest = hashlib.sha1(fh.read()).hexdigest()
+                try:
+                    with open(p, "rb") as fh:
+                        digest = hashlib.sha1(fh.read()).hexdigest()
+                except PermissionError:  # unreadable to a user who is not root: its stat stands for it
+                    digest = None
                 out[p] = ("file", s.st_size, s.st_mtime_ns, stat.S_IMODE(s.st_mode), digest)
             elif stat.S_ISDIR(s.st_mode):
                 out[p] = ("dir", stat.S_IMODE(s.st_mode))
@@ -488,15 +495,20 @@ def _drain(proc):
     return result
 
 
-def invoke_subprocess(box: Path, args, outputs=(), timeout=SUBPROCESS_TIMEOUT, signal_when=None) -> Outcome:
+def invoke_subprocess(box: Path, args, outputs=(), timeout=SUBPROCESS_TIMEOUT, signal_when=None, env=None,
+                      preexec_fn=None) -> Outcome:
     """`python -m granel ARGS` in `box` (arguments may be bytes: names that are not UTF-8);
-    `signal_when` = (condition(proc), signal): the signal is sent once the condition holds (polled)."""
+    `signal_when` = (condition(proc), signal): the signal is sent once the condition holds (polled);
+    `env`: variables merged over this process's (None unsets one); `preexec_fn`: run in the child
+    before Python starts (a umask, resource limits)."""
     before = snapshot(box)
     allowed = _allowed_paths(box, [os.fsdecode(o) if isinstance(o, bytes) else o for o in outputs], before)
     cmd = [sys.executable, "-m", "granel", *[a if isinstance(a, bytes) else str(a) for a in args]]
     t0 = time.perf_counter()
-    env = {**os.environ, "TMPDIR": tempfile.gettempdir()}  # a crash report lands in the module's folder
-    proc = subprocess.Popen(cmd, cwd=box, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    merged = {**os.environ, "TMPDIR": tempfile.gettempdir(), **(env or {})}  # a crash report lands in the module's folder
+    merged = {k: v for k, v in merged.items() if v is not None}
+    proc = subprocess.Popen(cmd, cwd=box, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=merged,
+                            preexec_fn=preexec_fn)
     try:
         if signal_when is not None:
             condition, sig = signal_when
@@ -526,9 +538,7 @@ def invoke_subprocess(box: Path, args, outputs=(), timeout=SUBPROCESS_TIMEOUT, s
 
 
 def scenario_of(source: str, overrides: list[str], shock=None) -> S.Scenario:
-    from granel.cli import load_scenario
-
-    return load_scenario(source, overrides, shock)
+    return S.load(source, overrides, shock=shock)
 
 
 def verify_result(path: Path, sc: S.Scenario) -> None:
@@ -630,9 +640,9 @@ def verify_scenario_file(path: Path, name=None) -> None:
 
 
 def verify_reciprocity(folder: Path, source: str, solid, duration, sets, shock, a="LSGM:3", b="SSGM:C") -> None:
-    from granel.cli import _overrides, _shock_level
+    from granel.cli import _overrides
 
-    level = _shock_level(shock)
+    level = S.shock_value(shock)
     for exc in (a, b):
         sc = scenario_of(source, _overrides(solid, exc, duration, sets=sets), level)
         verify_result(folder / f"shock-{exc.replace(':', '')}.nc", sc)
@@ -656,7 +666,7 @@ class Base:
 
 def _run_verify(scenario="scen.toml", out="out.nc"):
     def check(box, o, extra):
-        from granel.cli import _overrides, _shock_level
+        from granel.cli import _overrides
 
         opts = _options(extra)
         sets = opts.pop("--set", [])
@@ -665,9 +675,7 @@ def _run_verify(scenario="scen.toml", out="out.nc"):
         ov = _overrides(opts.get("--solid"), opts.get("--excite"), opts.get("--duration"), dt, opts.get("--solver"), sets)
         if opts.get("--checkpoint-every"):
             ov.append(f'simulation.checkpoint_every="{opts["--checkpoint-every"]}"')
-        from granel.cli import load_scenario
-
-        sc = load_scenario(scenario, ov, _shock_level(opts.get("--shock")), implied)
+        sc = S.load(scenario, ov, shock=S.shock_value(opts.get("--shock")), implied=implied)
         verify_result(box / out, sc)
         assert not (box / Path(out).with_suffix(".ckpt")).exists(), "a finished run left its checkpoint"
     return check
@@ -1129,6 +1137,25 @@ def _slow_if(cond):
                                        for r in INPUT_ROLES for k in INPUT_KINDS if k not in SUBPROCESS_KINDS])
 def test_hostile_input_paths(assets, role, kind):
     _input_case(assets, role, kind)
+
+
+def test_every_path_option_leaves_the_read_check_to_granel():
+    """click's own check of a path refuses an unreadable file with exit 2 and its wording, and
+    only to a user who is not root (root reads it anyway): no path option of any command asks
+    for it, so that granel's reading (exit 4, naming the file) answers for every user."""
+    from typer.main import get_command
+
+    from granel.cli import app
+
+    group = get_command(app)
+    checked = 0
+    for name, command in group.commands.items():
+        for param in command.params:
+            given = param.type_descriptor  # typer's record of the annotation and the options it was given
+            if given.annotation is Path:
+                checked += 1
+                assert not given.parameter_info.readable, f"granel {name} {param.name}: click checks its readability"
+    assert checked >= 15  # every input and output file of the commands (20 today)
 
 
 def _process_cases():
@@ -1896,6 +1923,443 @@ def test_wavefield_movie(assets):
     try:
         o = check_case(box, base("wavefield"), ["--movie", "--frames", "3", "--fps", "5"])
         assert o.code == 0, o
+    finally:
+        _release(box)
+
+
+# ------------------------------------------------------------------------------------------------
+# 8. hostile environments: caches, TMPDIR, HOME, the terminal, locale, umask, limits, clock (issue 37,
+# item 4)
+#
+# An environment is a builder (one row of ENVIRONMENTS): it makes what it needs in the case's
+# folder and returns a `Setting` (the child's variables, a function the child runs before Python
+# starts, the names the inputs and outputs take); a command is one row of ENV_COMMANDS (arguments
+# and outputs as templates over those names, and the reference check of an exit 0). Every
+# environment meets every command, in a process; each environment's `quick` commands run in the
+# quick suite, the others are slow. Besides the contract, a case holds: its exit code in the
+# environment's set, the environment's note on standard error where it names one, no temporary
+# left in the case's folder, no output on a failure (but an output folder holding only granel's
+# stamp), and no compiled-kernel cache written into the package's own folders (numba's fallback,
+# keyed by no source: `guard.jit`).
+
+ENV_NAMES = {"scen": "scen.toml", "chain": "chain.toml", "plate": "plate.toml", "result": "good.nc", "out": "out",
+             "name": "mine", "title": "paper"}  # title: the name field of the scenario `scen` names
+DEAD_PID = 2**22 + 1  # beyond any pid_max: never a live process
+PACKAGE_DIR = Path(granel.__file__).resolve().parent
+YEAR = 365.25 * 86400
+# a case may compile granel's kernels afresh (about a minute here): an environment whose kernel cache
+# is another folder than this process's, or sources edited since the last compile
+ENV_TIMEOUT = 300.0
+
+
+@dataclass
+class Setting:
+    """What an environment gives a case."""
+
+    env: dict = field(default_factory=dict)  # the child's variables over this process's (None unsets one)
+    preexec: object = None  # run in the child before Python starts (a umask, resource limits)
+    names: dict = field(default_factory=dict)  # over ENV_NAMES
+    codes: dict = field(default_factory=lambda: {"*": {0}})  # exit codes by command ("*": any other)
+    note: dict = field(default_factory=dict)  # text standard error must hold, by command ("*": every command)
+    outputs: list = field(default_factory=list)  # paths the environment lets the command change (a cache)
+    planted: list = field(default_factory=list)  # granel's own files of a dead process, put there (may go)
+    check: object = None  # check(box, outcome, command, names): more on an exit 0
+    failure: object = None  # failure(outcome, outputs): more on a failure (what its error line says)
+
+
+@dataclass
+class EnvCommand:
+    args: list  # templates over the names: "{scen}", "{out}.nc"
+    outputs: list
+    verify: object  # verify(box, outcome, names): the reference check of an exit 0
+    codes: set | None = None  # the exit codes in every environment (None: the environment's)
+    error: str = ""  # what its error line names, in every environment
+
+
+def _fill(templates, names) -> list[str]:
+    return [t.format(**names) for t in templates]
+
+
+def _verify_env_run(box, o, n):
+    sc = scenario_of(str(box / n["scen"]), [])
+    verify_result(box / f"{n['out']}.nc", sc)
+    ds = xr.load_dataset(box / f"{n['out']}.nc", engine="h5netcdf")
+    assert tomllib.loads(ds.attrs["scenario"])["name"] == n["title"], f"the result's scenario is not named {n['title']!r}"
+
+
+def _verify_env_resolved(box, o, n):
+    got = tomllib.loads(o.stdout)
+    assert got == tomllib.loads(S.to_toml(scenario_of(str(box / n["scen"]), []))), "--resolved printed another scenario"
+    assert got["name"] == n["title"]
+
+
+def _verify_env_modes(box, o, n):
+    verify_modes_json(o.stdout, 3)
+    got = json.loads(o.stdout)["periods_ms"]
+    assert np.allclose(got, PLATE_PERIODS_MS, rtol=1e-9, atol=0), f"periods {got}, the clean environment's {PLATE_PERIODS_MS}"
+
+
+PLATE_PERIODS_MS: list = []  # the plate's three longest periods in a clean environment (`env_reference`)
+
+ENV_COMMANDS = {
+    "run": EnvCommand(["run", "{scen}", "-o", "{out}.nc"], ["{out}.nc", "{out}.ckpt"], _verify_env_run),
+    "show": EnvCommand(["show", "{scen}", "-o", "{out}.png"], ["{out}.png"],
+                       lambda box, o, n: verify_picture(box / f"{n['out']}.png")),
+    "show --resolved": EnvCommand(["show", "{scen}", "--resolved"], [], _verify_env_resolved),
+    "refused run": EnvCommand(["run", "{scen}", "--set", "contact.mu=nan", "-o", "{out}.nc"], ["{out}.nc", "{out}.ckpt"],
+                              None, codes={2}, error="contact.mu"),
+    "run chain": EnvCommand(["run", "{chain}", "-o", "{out}.nc"], ["{out}.nc", "{out}.ckpt"],
+                            lambda box, o, n: verify_result(box / f"{n['out']}.nc", scenario_of(str(box / n["chain"]), []))),
+    "modes": EnvCommand(["modes", "{plate}", "--json", "--count", "3"], [], _verify_env_modes),
+    "export": EnvCommand(["export", "{result}", "-o", "{out}-exp"], ["{out}-exp"],
+                         lambda box, o, n: verify_export(box / f"{n['out']}-exp", box / n["result"])),
+    "animate": EnvCommand(["animate", "{result}", "-o", "{out}.gif", "--frames", "3", "--fps", "5"], ["{out}.gif"],
+                          lambda box, o, n: verify_movie(box / f"{n['out']}.gif", 3)),
+    "init": EnvCommand(["init", "{name}", "-o", "{out}.toml"], ["{out}.toml"],
+                       lambda box, o, n: verify_scenario_file(box / f"{n['out']}.toml", n["name"])),
+}
+
+
+@dataclass
+class Place:
+    """Where an environment is built: the case's folder and the module's fixtures (asked for when
+    a builder needs one)."""
+
+    box: Path
+    request: object
+
+    def fixture(self, name: str):
+        return self.request.getfixturevalue(name)
+
+
+def _readonly_folder(place: Place) -> Path:
+    """A folder this process cannot write: mode 555 for a user; for root, who writes through
+    modes, the read-only tmpfs (`readonly_fs`), or a skip where it cannot be mounted."""
+    if not IS_ROOT:
+        folder = place.box / "locked"
+        folder.mkdir()
+        os.chmod(folder, 0o555)
+        return folder
+    rofs = place.fixture("readonly_fs")
+    if rofs is None:
+        pytest.skip("a folder root cannot write needs the read-only tmpfs (mount failed here)")
+    return rofs
+
+
+def _a_file(place: Place) -> Path:
+    path = place.box / "plain.txt"
+    assert path.is_file()
+    return path
+
+
+NUMBA_NOTE = "NUMBA_CACHE_DIR"  # the compiled-kernel cache's note names the variable it could not use
+CACHE_NOTE = "cannot be written"  # the mode cache's note (solid.mode_cache.unwritable)
+
+
+def _numba_cache(where):
+    def build(place: Place) -> Setting:
+        return Setting(env={"NUMBA_CACHE_DIR": str(where(place))}, note={"*": NUMBA_NOTE})
+    return build
+
+
+def _granel_cache(where):
+    def build(place: Place) -> Setting:
+        return Setting(env={"GRANEL_CACHE": str(where(place))}, note={"modes": CACHE_NOTE})
+    return build
+
+
+def _tmpdir(where):
+    def build(place: Place) -> Setting:
+        return Setting(env={"TMPDIR": str(where(place))})
+    return build
+
+
+ASCII_LOCALE = {"LC_ALL": "C", "LANG": "C", "LC_CTYPE": None, "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0",
+                "PYTHONIOENCODING": None}
+
+
+def _ascii_locale(place: Place) -> Setting:
+    """The C locale without UTF-8 mode, where Python's file-system and console encodings are
+    ASCII; the scenario, the chain and its tables, the plate, the result and every output with
+    non-ASCII names, and the scenario and its result named "chaîne" (init's NAME too). A table
+    whose name the locale cannot encode may be refused (exit 2)."""
+    probe = subprocess.run([sys.executable, "-c", "import sys; print(sys.getfilesystemencoding())"],
+                           env={k: v for k, v in {**os.environ, **ASCII_LOCALE}.items() if v is not None},
+                           capture_output=True, text=True, timeout=60)
+    if probe.stdout.strip().lower() not in ("ascii", "ansi_x3.4-1968"):
+        pytest.skip(f"the C locale's file-system encoding is {probe.stdout.strip()!r} here, not ASCII")
+    box, names = place.box, {"scen": "chaîne.toml", "chain": "collier.toml", "plate": "plaque-é.toml",
+                             "result": "résultat.nc", "out": "sortie-ü", "name": "chaîne", "title": "chaîne"}
+    text = (box / "scen.toml").read_text()
+    assert text.count('name = "paper"') == 1
+    (box / names["scen"]).write_text(text.replace('name = "paper"', 'name = "chaîne"'), encoding="utf-8")
+    chain = CHAIN.replace('"beads.csv"', '"perles-é.csv"').replace('"force.csv"', '"force-é.csv"')
+    assert chain != CHAIN and "perles-é.csv" in chain and "force-é.csv" in chain
+    (box / names["chain"]).write_text(chain, encoding="utf-8")
+    shutil.copy(box / "beads.csv", box / "perles-é.csv")
+    shutil.copy(box / "force.csv", box / "force-é.csv")
+    shutil.copy(box / "plate.toml", box / names["plate"])
+    res = _invoke_raw(["run", names["scen"], "-o", names["result"]], box)  # a result named "chaîne"
+    assert res.exit_code == 0, res.output
+    return Setting(env=dict(ASCII_LOCALE), names=names, codes={"*": {0}, "run chain": {0, 2}},
+                   failure=_says("file-name encoding"))
+
+
+def _says(text: str, names_output: bool = False):
+    """A failure's check: its error line holds `text` (and names one of the outputs)."""
+    def failure(o, outputs):
+        assert text in o.error, f"the error does not say {text!r}\n{o}"
+        if names_output:
+            assert any(Path(p).name in o.error for p in outputs), f"the error names none of the outputs {outputs}\n{o}"
+    return failure
+
+
+def _umask_modes(mask: int):
+    def check(box, o, command, names):
+        outs = [box / p for p in _fill(ENV_COMMANDS[command].outputs, names)]
+        files = [f for p in outs if p.exists() for f in ([p] if p.is_file() else p.rglob("*")) if f.is_file()]
+        for f in files:
+            mode = stat.S_IMODE(f.stat().st_mode)
+            assert mode == 0o666 & ~mask, f"{f}: mode {mode:o}, the umask {mask:03o} gives {0o666 & ~mask:o}"
+    return check
+
+
+def _umask(mask: int):
+    """The umask `mask`: the outputs written with its modes; a user (not root) whose umask takes
+    the owner's write permission away may be refused a folder granel makes (exit 4, naming it)."""
+    def build(place: Place) -> Setting:
+        closed = mask & 0o300 and not IS_ROOT
+        return Setting(preexec=lambda: os.umask(mask), codes={"*": {0, 4} if closed else {0}}, check=_umask_modes(mask),
+                       failure=_says("umask"))
+    return build
+
+
+def _limit(kind: int, value: int):
+    def preexec():
+        resource.setrlimit(kind, (value, value))
+    return preexec
+
+
+@pytest.fixture(scope="module")
+def least_nofile(assets):
+    """The least RLIMIT_NOFILE with which `granel --version` (Python, and every module granel
+    imports to start) ends with exit 0 here; below it Python itself cannot start."""
+    for n in range(3, 65):
+        res = subprocess.run([sys.executable, "-m", "granel", "--version"], preexec_fn=_limit(resource.RLIMIT_NOFILE, n),
+                             capture_output=True, timeout=60, cwd=assets)
+        if res.returncode == 0:
+            return n
+    pytest.skip("granel did not start with up to 64 open files")
+
+
+def _nofile(extra: int):
+    def build(place: Place) -> Setting:
+        n = place.fixture("least_nofile") + extra
+        return Setting(preexec=_limit(resource.RLIMIT_NOFILE, n), codes={"*": {0, 4}}, failure=_says("open files"))
+    return build
+
+
+FSIZE = 16 * 1024  # bytes: more than init's scenario and export's CSV files, less than a result, a picture or a movie
+
+
+def _fsize(place: Place) -> Setting:
+    return Setting(preexec=_limit(resource.RLIMIT_FSIZE, FSIZE), codes={"*": {0, 4}, "run": {4}, "show": {4}},
+                   failure=_says("file-size limit", names_output=True))
+
+
+CLOCK_SITE = '''"""The hostile harness's clock: time.time and time.time_ns shifted by HOSTILE_CLOCK_SHIFT seconds."""
+import os
+import time
+
+_shift = float(os.environ.get("HOSTILE_CLOCK_SHIFT", "0"))
+_time, _time_ns = time.time, time.time_ns
+time.time = lambda: _time() + _shift
+time.time_ns = lambda: _time_ns() + int(_shift * 1e9)
+'''
+
+
+@pytest.fixture(scope="module")
+def clock_site(tmp_path_factory):
+    """A folder holding a sitecustomize.py that shifts the clock (outside the case folders, where
+    Python may write its bytecode)."""
+    folder = tmp_path_factory.mktemp("clock")
+    (folder / "sitecustomize.py").write_text(CLOCK_SITE)
+    return folder
+
+
+def _clock_check(shift: float):
+    def check(box, o, command, names):
+        if command == "export":  # the folder's stamp records when it was made, by the child's clock
+            made = json.loads((box / f"{names['out']}-exp" / ".granel-folder.json").read_text())["made"]
+            assert abs(made - (time.time() + shift)) < 86400, f"the stamp says {made}: the clock was not shifted"
+    return check
+
+
+def _clock(years: float):
+    def build(place: Place) -> Setting:
+        shift = years * YEAR
+        path = os.pathsep.join(p for p in (str(place.fixture("clock_site")), os.environ.get("PYTHONPATH")) if p)
+        return Setting(env={"PYTHONPATH": path, "HOSTILE_CLOCK_SHIFT": repr(shift)}, check=_clock_check(shift))
+    return build
+
+
+def _dead_leftovers(folder: Path) -> list[Path]:
+    """A temporary file and a staging folder of a dead granel process in `folder`, as guard.writing
+    names them."""
+    from granel.guard.owners import process_token
+    from granel.guard.writing import PREFIX, STAGE, SUFFIX
+
+    token = process_token(DEAD_PID)
+    tmp = folder / f"{PREFIX}0123456789-{token}-abcdefgh{SUFFIX}"
+    tmp.write_bytes(b"half a result")
+    stage = folder / f"{STAGE}{token}-abcdefgh"
+    stage.mkdir()
+    (stage / "traces.csv").write_text("half an export\n")
+    return [tmp, stage]
+
+
+def _dated(when):
+    """Every input, a private copy of the mode cache, and a dead process's temporary and staging
+    folder, all dated `when(now)` (modification and access times)."""
+    def build(place: Place) -> Setting:
+        box = place.box
+        cache = box / "cache"
+        shutil.copytree(os.environ["GRANEL_CACHE"], cache)
+        planted = _dead_leftovers(box)
+        t = when(time.time())
+        for p in [*box.rglob("*"), box]:
+            os.utime(p, (t, t), follow_symlinks=False)
+        return Setting(env={"GRANEL_CACHE": str(cache)}, outputs=["cache"], planted=planted)
+    return build
+
+
+def _variables(**values):
+    def build(place: Place) -> Setting:
+        return Setting(env={k: v(place) if callable(v) else v for k, v in values.items()})
+    return build
+
+
+def _home_a_file(place: Place) -> Setting:
+    """HOME a file: no ~/.cache, no matplotlib configuration folder (granel's kernels are then
+    cached beside the package, where this needs it writable: else every case compiles them)."""
+    if not os.access(PACKAGE_DIR / "__pycache__", os.W_OK):
+        pytest.skip("the package's __pycache__ is not writable here: without a home each case compiles for a minute")
+    return Setting(env={"HOME": str(_a_file(place)), "XDG_CACHE_HOME": None, "XDG_CONFIG_HOME": None,
+                        "MPLCONFIGDIR": None})
+
+
+@dataclass
+class Environment:
+    build: object  # build(place) -> Setting
+    quick: tuple = ()  # the commands of the quick suite
+
+
+ENVIRONMENTS = {
+    "NUMBA_CACHE_DIR read-only": Environment(_numba_cache(_readonly_folder), ("run",)),
+    "NUMBA_CACHE_DIR a file": Environment(_numba_cache(_a_file), ("init",)),
+    "NUMBA_CACHE_DIR below a file": Environment(_numba_cache(lambda p: _a_file(p) / "numba"), ("show --resolved",)),
+    "GRANEL_CACHE read-only": Environment(_granel_cache(_readonly_folder), ("modes",)),
+    "GRANEL_CACHE a file": Environment(_granel_cache(_a_file), ("modes",)),
+    "GRANEL_CACHE below a file": Environment(_granel_cache(lambda p: _a_file(p) / "cache")),
+    "TMPDIR missing": Environment(_tmpdir(lambda p: p.box / "no-such-folder"), ("init",)),
+    "TMPDIR a file": Environment(_tmpdir(_a_file), ("show",)),
+    "HOME a file": Environment(_home_a_file),
+    "COLUMNS 0": Environment(_variables(COLUMNS="0"), ("refused run",)),
+    "COLUMNS 1": Environment(_variables(COLUMNS="1")),
+    "LINES 0": Environment(_variables(LINES="0")),
+    "ASCII locale, non-ASCII names": Environment(_ascii_locale, ("run", "show --resolved", "init")),
+    "umask 077": Environment(_umask(0o077), ("show",)),
+    "umask 277": Environment(_umask(0o277), ("export",)),
+    "RLIMIT_NOFILE the least to start": Environment(_nofile(0), ("show",)),
+    "RLIMIT_NOFILE one more": Environment(_nofile(1), ("run",)),
+    "RLIMIT_FSIZE 16 KiB": Environment(_fsize, ("run",)),
+    "clock 60 years ahead": Environment(_clock(60), ("export",)),
+    "clock 40 years behind": Environment(_clock(-40), ("init",)),
+    "files dated 1970": Environment(_dated(lambda now: 0), ("modes",)),
+    "files dated 60 years ahead": Environment(_dated(lambda now: now + 60 * YEAR), ("run",)),
+}
+
+
+@pytest.fixture(scope="module")
+def env_reference(assets):
+    """The plate's three longest periods in this process's environment (`modes` cases compare)."""
+    res = _invoke_raw(["modes", "plate.toml", "--json", "--count", "3"], assets)
+    assert res.exit_code == 0, res.output
+    PLATE_PERIODS_MS[:] = json.loads(res.stdout)["periods_ms"]
+    return PLATE_PERIODS_MS
+
+
+KERNEL_CACHE_FILES = ("*.nbi", "*.nbc", "granel-manifest.json", ".granel-*.lock")
+
+
+def kernel_files_in_the_package(since: float) -> list[Path]:
+    """numba's cache files written in the package's own folders (not in a keyed `kernels-KEY`
+    folder) since `since`: numba's fallback when granel's folder cannot be used."""
+    found = []
+    for pattern in KERNEL_CACHE_FILES:
+        for p in PACKAGE_DIR.rglob(pattern):
+            if any(part.startswith("kernels-") for part in p.relative_to(PACKAGE_DIR).parts):
+                continue
+            with contextlib.suppress(OSError):
+                if p.stat().st_mtime >= since:
+                    found.append(p)
+    return found
+
+
+def _leftovers(box: Path, planted) -> list[str]:
+    """granel's temporaries and staging folders in the case's folder, but for those planted."""
+    planted = {Path(p) for p in planted}
+    return sorted(str(p.relative_to(box)) for p in box.rglob(".granel-*")
+                  if p not in planted and not any(q in planted for q in p.parents) and p.name != ".granel-folder.json")
+
+
+def _env_cases():
+    for env, e in ENVIRONMENTS.items():
+        for command in ENV_COMMANDS:
+            yield pytest.param(env, command, id=f"{env}-{command}", marks=_slow_if(command not in e.quick))
+
+
+@pytest.mark.parametrize("env,command", list(_env_cases()))
+def test_hostile_environments(assets, env_reference, request, env, command):
+    """A command in a hostile environment: the contract, and the checks the section's comment
+    lists; an exit 0 with a confirmed result."""
+    box = new_box(assets)
+    try:
+        s = ENVIRONMENTS[env].build(Place(box, request))
+        names = {**ENV_NAMES, **s.names}
+        c = ENV_COMMANDS[command]
+        args, outputs = _fill(c.args, names), _fill(c.outputs, names)
+        existed = {o for o in outputs if os.path.lexists(box / o)}
+        since = time.time() - 1.0
+        o = invoke_subprocess(box, args, [*outputs, *s.outputs, *s.planted], ENV_TIMEOUT, env=s.env, preexec_fn=s.preexec)
+        codes = c.codes or s.codes.get(command, s.codes["*"])
+        assert o.code in codes, f"{env}, {command}: exit {o.code}, expected {sorted(codes)}\n{o}"
+        stray = kernel_files_in_the_package(since)
+        assert not stray, f"{env}, {command}: compiled-kernel cache files written in the package: {stray[:3]}\n{o}"
+        note = s.note.get(command, s.note.get("*"))
+        if note:
+            assert note in o.stderr, f"{env}, {command}: no note naming {note!r} on standard error\n{o}"
+        left = _leftovers(box, s.planted)
+        assert not left, f"{env}, {command}: temporaries left: {left}\n{o}"
+        if o.code == 0:
+            try:
+                with _chdir(box):
+                    c.verify(box, o, names)
+                    if s.check is not None:
+                        s.check(box, o, command, names)
+            except AssertionError as e:
+                raise AssertionError(f"{env}, {command}: exit 0, but the reference check fails: {e}\n{o}") from e
+            if s.planted and any(Path(p).parent == Path(".") and (box / p).is_file() for p in outputs):
+                # a file written beside the dead process's leftovers removed them
+                assert not any(p.exists() for p in s.planted), f"{env}, {command}: a dead process's temporaries kept\n{o}"
+        else:  # no output, but an output folder holding only granel's stamp (a rerun may use it)
+            made = [p for p in outputs if p not in existed and os.path.lexists(box / p)
+                    and not ((box / p).is_dir() and {q.name for q in (box / p).iterdir()} <= {".granel-folder.json"})]
+            assert not made, f"{env}, {command}: exit {o.code} left outputs {made}\n{o}"
+            if c.error:
+                assert c.error in o.error, f"{env}, {command}: the error does not name {c.error!r}\n{o}"
+            elif s.failure is not None:
+                s.failure(o, outputs)
     finally:
         _release(box)
 

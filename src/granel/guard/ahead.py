@@ -1,16 +1,7 @@
-"""Compile ahead in a second process: while a process compiles its kernels in the order it calls
-them, another compiles the ones it will call last, into the same cache, so that a cold start
-waits for the longer of the two halves instead of their sum (docs/performance.md, "Where a cold
-compile goes").
-
-`compile_ahead(plan, args)` starts `python -m granel.guard.ahead FILE` when the kernels are not
-cached yet, this machine has a second core and no other process is compiling ahead into the same
-cache (the folder's AHEAD_LOCK, handed to the child, which holds it until it ends). The child
-calls `plan(*args)` ("module:function", importable), which yields (kernel, arguments) pairs, and
-compiles each kernel for the numba types of its arguments. The kernels' own compile locks
-(`guard.jit`) keep the two processes from compiling one kernel twice: whichever comes second
-waits and loads it. A child that fails changes nothing but the time: the parent compiles what
-it finds missing."""
+"""Compile ahead in a second process: `compile_ahead` starts `python -m granel.guard.ahead FILE`,
+which compiles the kernels a cold process will call last (the (kernel, arguments) pairs of a
+plan) into the same cache while that process compiles the others. docs/architecture.md ("The
+compiled-code cache") says when it starts; docs/performance.md what it saves."""
 
 from __future__ import annotations
 

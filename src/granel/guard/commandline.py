@@ -4,10 +4,14 @@ on standard error and one of the documented exit codes (`exits`), never a traceb
 `GuardedGroup` is the click group of the `granel` command: it formats usage errors on one line
 (with the replacement of a removed option), maps every exception through `exits.exit_code`, turns
 Ctrl-C and SIGTERM into exits 130 and 143, writes the traceback of an internal error (a bug) to a
-file it names, and shows Python warnings as one line each."""
+file it names, and shows Python warnings as one line each. Standard output and error never fail
+on a character their encoding cannot hold (an ASCII locale): it is escaped (`console_streams`);
+and text given on the command line is read as UTF-8 whatever the locale (`text_argument`)."""
 
 from __future__ import annotations
 
+import codecs
+from contextlib import contextmanager
 import os
 import sys
 import tempfile
@@ -27,10 +31,22 @@ except ImportError:  # pragma: no cover - older typer uses click itself
 
 Exit, Abort = typer.Exit, typer.Abort
 
-from .exits import INTERNAL, INTERRUPTED, TERMINATED, USAGE, GranelError, Terminated, exit_code, is_no_space, is_numerical
+from .exits import (FILES, INTERNAL, INTERRUPTED, TERMINATED, USAGE, GranelError, NotWritten, Terminated, describe,
+                    exit_code, is_no_space, is_numerical)
 from .signals import stops_as_exceptions
 
-console = Console(stderr=True, soft_wrap=True)
+
+def make_console(**options) -> Console:
+    """A rich console (on standard output unless `stderr=True`) whatever the environment says of
+    the terminal: a COLUMNS or LINES of 0, with which rich would print nothing, counts as unset."""
+    for name, key in (("COLUMNS", "width"), ("LINES", "height")):
+        value = os.environ.get(name, "").strip()
+        if value.isdigit() and int(value) < 1:
+            options.setdefault(key, 80 if key == "width" else 25)
+    return Console(**options)
+
+
+console = make_console(stderr=True, soft_wrap=True)
 
 # options of earlier releases, by command: their replacement
 REMOVED = {
@@ -60,6 +76,91 @@ def note(message: str) -> None:
 
 def _warning(message, category, filename, lineno, file=None, line=None):
     console.print(f"[yellow]warning:[/] {escape(one_line(str(message)))}", emoji=False)
+
+
+ESCAPE = "granel-escape"
+
+
+def _escape(e: UnicodeError):
+    """The console's codec error handler: a character its encoding cannot hold is written as a
+    \\uXXXX escape (as TOML and JSON strings write it), a byte of a name the locale could not
+    decode (a lone surrogate) as the text \\xNN (as `guard.writing.storable` keeps it)."""
+    if not isinstance(e, UnicodeEncodeError):
+        raise e
+    out = []
+    for ch in e.object[e.start:e.end]:
+        n = ord(ch)
+        out.append(f"\\x{n - 0xDC00:02x}" if 0xDC80 <= n <= 0xDCFF else f"\\u{n:04x}" if n <= 0xFFFF else f"\\U{n:08x}")
+    return "".join(out), e.end
+
+
+codecs.register_error(ESCAPE, _escape)
+
+
+def console_streams() -> None:
+    """This process's standard output and error write what their encoding cannot hold escaped
+    (`_escape`) instead of failing (the C locale's ASCII); streams another caller put in their
+    place (a test's runner) are left as they are."""
+    for stream, own in ((sys.stdout, sys.__stdout__), (sys.stderr, sys.__stderr__)):
+        if stream is None or stream is not own or getattr(stream, "errors", ESCAPE) == ESCAPE:
+            continue
+        try:
+            stream.reconfigure(errors=ESCAPE)
+        except (AttributeError, ValueError, OSError):
+            pass
+
+
+def text_argument(value: str) -> str:
+    """A text given on the command line (a name, a --set value) as the user typed it: where the
+    locale is not UTF-8, Python holds the bytes it could not decode as lone surrogates, and those
+    that form UTF-8 are decoded so (file names are left as they are: they name the bytes)."""
+    if not isinstance(value, str) or not any("\udc80" <= ch <= "\udcff" for ch in value):
+        return value
+    try:
+        return os.fsencode(value).decode("utf-8")
+    except UnicodeError:
+        return value
+
+
+def print_table(rows, header=None, title=None, out=None, **options) -> None:
+    """Rows (lists of strings) as a table on `out` (default standard output); without `header`,
+    (label, value) rows."""
+    from rich.table import Table
+
+    t = Table(*(header or []), title=title, show_header=header is not None, **options)
+    for row in rows:
+        t.add_row(*row)
+    (out or make_console()).print(t)
+
+
+def progress_bar(label: str = "[bold]{task.description}", counted: bool = True, extra=(), remaining: bool = True,
+                 **options):
+    """A rich progress bar on standard error: `label`, the bar, done/total with `counted` (else a
+    percentage), the `extra` columns, the time elapsed and, with `remaining`, the time left."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    done = TextColumn("{task.completed}/{task.total}") if counted else TextColumn("{task.percentage:>5.1f}%")
+    return Progress(TextColumn(label), BarColumn(), done, *extra, TimeElapsedColumn(),
+                    *([TimeRemainingColumn()] if remaining else []), console=console, **options)
+
+
+def why_not_written(e: BaseException) -> str:
+    """Why a write failed: an OSError's reason with the limit it met and the file it names."""
+    if isinstance(e, GranelError) or not isinstance(e, OSError):
+        return str(e)
+    return describe(e) + (f": {e.filename}" if e.filename else "")
+
+
+@contextmanager
+def written(option: str, what: str):
+    """A failed write of `what` (an OSError, or `NotWritten` from a study) ends the command with
+    exit 4 naming `option` and the reason."""
+    try:
+        yield
+    except NotWritten as e:
+        raise GranelError(f"{option}: cannot write {e.what} ({why_not_written(e.cause)})", FILES) from None
+    except OSError as e:
+        raise GranelError(f"{option}: cannot write {what} ({why_not_written(e)})", FILES) from None
 
 
 def _usage_message(e: UsageError) -> str:
@@ -112,7 +213,7 @@ def exit_for(e: BaseException) -> int:
         error(f"{str(name) + ': ' if name else ''}no space left on the device; nothing was written there")
     elif isinstance(e, OSError):
         name = getattr(e, "filename", None)
-        error(f"{str(name) + ': ' if name else ''}{e.strerror or e}")
+        error(f"{str(name) + ': ' if name else ''}{describe(e)}")
     else:
         error(str(e))
     return code
@@ -136,6 +237,7 @@ class GuardedGroup(TyperGroup):
             raise Exit(exit_for(e)) from None
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        console_streams()
         with stops_as_exceptions(), warnings.catch_warnings():
             warnings.showwarning = _warning
             try:

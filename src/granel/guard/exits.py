@@ -17,6 +17,11 @@ from __future__ import annotations
 
 import errno
 
+try:  # imported now: with no descriptor left, importing it later fails too
+    import resource
+except ImportError:  # pragma: no cover - not on Windows
+    resource = None
+
 OK, INTERNAL, USAGE, STOPPED, FILES, INTERRUPTED, TERMINATED = 0, 1, 2, 3, 4, 130, 143
 
 
@@ -55,6 +60,14 @@ class NotWritten(GranelError):
         self.what, self.path, self.cause = what, path, cause
 
 
+def option_value(option: str, text, parse):
+    """`parse(text)`, its ValueError an InputError naming the option and the text given (exit 2)."""
+    try:
+        return parse(text)
+    except ValueError as e:
+        raise InputError(f"{option} {text}: {e}") from None
+
+
 class ResourceError(InputError):
     """A request whose estimated memory, disk or size exceeds what the machine has or a limit
     (exit 2), refused before anything is spent."""
@@ -75,6 +88,62 @@ def is_no_space(e: BaseException) -> bool:
         return True
     text = str(e).lower()
     return "no space left" in text or "disk quota exceeded" in text
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= scale:
+            return f"{n / scale:.4g} {unit}"
+    return f"{n} bytes"
+
+
+def _limit(kind: str):
+    """This process's soft limit `kind` (a `resource.RLIMIT_*` name), or None where unknown or unlimited."""
+    try:
+        soft = resource.getrlimit(getattr(resource, kind))[0]
+    except (AttributeError, OSError, ValueError):
+        return None
+    return None if soft == getattr(resource, "RLIM_INFINITY", -1) else soft
+
+
+def describe(e: OSError) -> str:
+    """An OSError's reason, and for a limit of the process (the size of a file, the open files)
+    the limit and the setting that gives it."""
+    reason = e.strerror or str(e)
+    if e.errno == errno.EFBIG:
+        limit = _limit("RLIMIT_FSIZE")
+        return reason + (f" (the file-size limit of this process is {_size(limit)}: ulimit -f)" if limit is not None
+                         else " (beyond the file-size limit of this process or of the file system)")
+    if e.errno == errno.EMFILE:
+        limit = _limit("RLIMIT_NOFILE")
+        return reason + (f" (the limit of open files of this process is {limit}: ulimit -n)" if limit is not None
+                         else " (the limit of open files of this process: ulimit -n)")
+    if e.errno == errno.ENFILE:
+        return reason + " (the system's limit of open files)"
+    if e.errno in (errno.EACCES, errno.EPERM):
+        mask = _umask()
+        if mask is not None and mask & 0o300:
+            return reason + f" (the umask {mask:03o} makes the folders and files this process creates closed to itself)"
+    return reason
+
+
+def _umask() -> int | None:
+    """This process's umask (Linux's /proc, else set and restored), or None where unknown."""
+    try:
+        with open("/proc/self/status", "rb") as fh:
+            for line in fh:
+                if line.startswith(b"Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        mask = os.umask(0o022)
+        os.umask(mask)
+        return mask
+    except OSError:
+        return None
 
 
 # failures of the numerics on values beyond what float64 models hold (a solid 1e-300 m wide, a

@@ -1,23 +1,9 @@
-"""numba's on-disk cache of granel's compiled kernels, keyed by all of their sources.
-
-numba keys a cached function by its own source file only, so a kernel that inlines a compiled
-function of another file would keep stale machine code (docs/performance.md, "A regression, found
-and fixed"). `cached_njit(sources)` gives a `numba.njit` whose cache folder is named after a hash
-of every listed source and numba's version: `__pycache__/kernels-KEY` beside this package when it
-can be written, else `~/.cache/granel/numba/kernels-KEY`, or `NUMBA_CACHE_DIR/granel-kernels-KEY`.
-Older folders are removed, the newest KEEP kept.
-
-A damaged cache file ends a process inside numba, so each folder keeps a manifest (`MANIFEST`:
-every file's size and CRC-32), recorded after numba saves a kernel (`_record_kernel`); a kernel
-whose files do not match it is removed and compiled again (`_check_kernel`).
-
-Processes that start at once (a study's workers) compile each kernel once: a process that misses
-a kernel in the cache compiles it holding that kernel's compile lock (`compile_lock_path`), and
-the others wait for that lock and then load what it saved (`_compile_lock`), at most
-`COMPILE_WAIT_S` (then `CompileWaitTimeout`, naming the holder). One lock per kernel, so that
-processes can compile different kernels at once (`guard.ahead`); a process holds only the locks
-of the kernels on its current chain of compiles, a path down the call graph, so two processes
-cannot wait for each other."""
+"""numba's on-disk cache of granel's compiled kernels, keyed by all of their sources:
+`cached_njit(sources)` gives a `numba.njit` whose cache folder is named after a hash of every
+listed source and numba's version (`cache_folder`), with a manifest of the folder's files checked
+before a kernel is loaded, and one compile lock per kernel, so that processes starting at once
+compile each kernel once. docs/architecture.md ("The compiled-code cache") describes the folders,
+the manifest and the locks."""
 
 from __future__ import annotations
 
@@ -68,28 +54,71 @@ def sources_key(sources) -> str:
     return h.hexdigest()[:16]
 
 
-def _writable(folder: Path) -> bool:
+def _unusable(folder: Path) -> str | None:
+    """Why `folder` cannot hold a cache (it is made if missing), or None if it can."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".granel-probe-", dir=folder)
         os.close(fd)
         os.unlink(probe)
-        return True
-    except OSError:
-        return False
+        return None
+    except OSError as e:
+        return e.strerror or str(e)
+    except ValueError as e:  # a NUL in the name
+        return str(e)
 
 
-def cache_folder(sources, home: Path) -> Path:
-    """Where the compiled code of `sources` is cached (made if missing), `home` being the folder
-    whose `__pycache__` holds it when writable."""
+def _home_cache() -> list[Path]:
+    try:
+        return [Path.home() / ".cache" / "granel" / "numba"]
+    except (RuntimeError, KeyError, OSError):  # no home to be found
+        return []
+
+
+def cache_folder(sources, home: Path) -> Path | None:
+    """Where the compiled code of `sources` is cached (made if missing): NUMBA_CACHE_DIR's
+    folder, else `home`/__pycache__, else ~/.cache/granel/numba, the first that can be written;
+    None if none can (the kernels are then compiled in every process). A NUMBA_CACHE_DIR that
+    cannot be used, or no folder at all, is said in one note (`_announce`)."""
     key = sources_key(sources)
     user = os.environ.get("NUMBA_CACHE_DIR", "").strip()
+    why = None
     if user:
-        return Path(user) / f"granel-{PREFIX}{key}"
-    for base in (home / "__pycache__", Path.home() / ".cache" / "granel" / "numba"):
-        if _writable(base):
-            return base / f"{PREFIX}{key}"
-    return home / "__pycache__" / f"{PREFIX}{key}"  # numba then warns that it cannot cache
+        folder = Path(user) / f"granel-{PREFIX}{key}"
+        why = _unusable(folder)
+        if why is None:
+            return folder
+    found = next((base / f"{PREFIX}{key}" for base in (home / "__pycache__", *_home_cache())
+                  if _unusable(base) is None), None)
+    instead = (f"granel keeps its compiled kernels in {found.parent} instead" if found is not None else
+               "no other folder can be written either, so granel compiles its kernels in every process (about a minute)")
+    if user:
+        _announce(f"compiled-kernel cache: NUMBA_CACHE_DIR={user} cannot be used ({why}); {instead}")
+    elif found is None:
+        _announce(f"compiled-kernel cache: neither {home / '__pycache__'} nor ~/.cache/granel/numba can be written; "
+                  "granel compiles its kernels in every process (about a minute); set NUMBA_CACHE_DIR to a folder "
+                  "it can write")
+    return found
+
+
+_ANNOUNCED: set = set()
+
+
+def _announce(message: str) -> None:
+    """`message` as one line on standard error, once per process, in the process the user started
+    only (not a study's workers): the kernels are decorated as granel is imported, before the
+    command line shows warnings."""
+    import multiprocessing
+    import sys
+
+    if message in _ANNOUNCED or multiprocessing.parent_process() is not None:
+        return
+    _ANNOUNCED.add(message)
+    try:
+        sys.stderr.write(f"note: {message}\n")
+        sys.stderr.flush()
+    except (AttributeError, OSError, ValueError):
+        pass
 
 
 def prune(folder: Path, keep: int = KEEP) -> list[Path]:
@@ -122,13 +151,14 @@ def _cache_dir(folder: Path):
 
 
 def cached_njit(sources, home: Path = PACKAGE):
-    """`numba.njit` whose `cache=True` caches in the folder of `sources`' key (`cache_folder`)."""
+    """`numba.njit` whose `cache=True` caches in the folder of `sources`' key (`cache_folder`),
+    or nowhere: never in numba's own folders, which would keep stale kernels."""
     state = {}
 
-    def folder() -> Path:
+    def folder() -> Path | None:
         if "folder" not in state:
             state["folder"] = f = cache_folder(sources, home)
-            if f.parent.exists():
+            if f is not None and f.parent.exists():
                 prune(f)
         return state["folder"]
 
@@ -140,8 +170,19 @@ def cached_njit(sources, home: Path = PACKAGE):
             return deco
 
         def apply(fn):
-            with _cache_dir(folder()):
-                return checked(deco(fn))
+            f = folder()
+            if f is None:
+                return numba.njit(*args, **{**options, "cache": False})(fn)
+            with _cache_dir(f):
+                try:
+                    dispatcher = deco(fn)
+                except RuntimeError:  # numba found no folder it could write after all
+                    return numba.njit(*args, **{**options, "cache": False})(fn)
+            if not str(getattr(dispatcher._cache, "_cache_path", "")).startswith(str(f)):
+                from numba.core.caching import NullCache
+
+                dispatcher._cache = NullCache()  # numba fell back to a folder of its own
+            return checked(dispatcher)
         return apply
 
     return njit

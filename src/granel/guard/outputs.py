@@ -223,6 +223,30 @@ class OutputPlan:
         return self
 
 
+def check_outputs(inputs=(), files=(), folder=None, prepare: bool = True) -> OutputPlan:
+    """Check (and make, with `prepare`) a command's outputs before any computation: `files` as
+    (path, option), `folder` as (path, option, kind, recognise); `inputs` the files it reads."""
+    plan = OutputPlan(inputs=[Path(p) for p in inputs if p is not None])
+    if folder is not None:
+        plan.folder(*folder)
+    for path, option in files:
+        plan.file(path, option)
+    plan.check()
+    return plan.prepare() if prepare else plan
+
+
+def picture_file(output: Path, option: str, inputs=()) -> Path:
+    """A picture to write, checked and its folder made: a format whose files carry granel's mark
+    (`owners.PICTURE_FORMATS`), under the output rules."""
+    from .owners import PICTURE_FORMATS
+
+    if output.suffix.lower().lstrip(".") not in PICTURE_FORMATS:
+        raise OutputPathError(f"{option} {output}: give a picture file name ending in one of "
+                              f"{', '.join('.' + k for k in PICTURE_FORMATS)}")
+    check_outputs(inputs, [(output, option)])
+    return output
+
+
 @contextmanager
 def removed_if_refused(folder: Path):
     """Around a command's work on output folder `folder`, prepared inside the block: when the

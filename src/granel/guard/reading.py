@@ -11,6 +11,7 @@ import math
 import os
 import re
 import stat
+import sys
 import tomllib
 from pathlib import Path
 
@@ -30,6 +31,10 @@ def check_file(path: str | Path, what: str = "file") -> Path:
     path = Path(path)
     try:
         st = os.stat(path)
+    except UnicodeEncodeError:  # a name from a UTF-8 file, in a locale whose file names are ASCII
+        raise InputFileError(f"{what} {str(path).encode('ascii', 'backslashreplace').decode()}: the name cannot be "
+                             f"written in this locale's file-name encoding ({sys.getfilesystemencoding()}); run granel "
+                             "in a UTF-8 locale (LC_ALL=C.UTF-8) or without PYTHONUTF8=0", USAGE) from None
     except FileNotFoundError:
         raise InputFileError(f"{what} {path}: no such file", USAGE) from None
     except NotADirectoryError:
@@ -62,7 +67,40 @@ def read_bytes(path: str | Path, what: str = "file", limit: int = MAX_TEXT_BYTES
 
 def read_text(path: str | Path, what: str = "file", limit: int = MAX_TEXT_BYTES) -> str:
     """A UTF-8 text file (a byte-order mark is allowed)."""
-    data = read_bytes(path, what, limit)
+    return _decoded(read_bytes(path, what, limit), what, path)
+
+
+_STDIN: dict = {}
+
+
+def read_stdin(what: str = "file", limit: int = MAX_TEXT_BYTES) -> str:
+    """Standard input as UTF-8 text, read once per process (a second call gets the same text, so
+    that a command may load its scenario twice); a terminal is refused, since it would wait for
+    typing with no prompt."""
+    stream = sys.stdin
+    if _STDIN.get("stream") is not stream or "text" not in _STDIN:
+        _STDIN.clear()
+        if stream is None or stream.closed:
+            raise InputFileError(f"{what} -: there is no standard input to read", USAGE)
+        try:
+            if stream.isatty():
+                raise InputFileError(f"{what} -: standard input is a terminal; pipe the file in, e.g. "
+                                     "granel run - < my.toml", USAGE)
+            data = getattr(stream, "buffer", stream).read(limit + 1)
+        except InputFileError:
+            raise
+        except (OSError, ValueError) as e:
+            raise InputFileError(f"{what} -: cannot read standard input ({getattr(e, 'strerror', None) or e})", FILES) from None
+        if isinstance(data, str):
+            data = data.encode("utf-8", "surrogateescape")
+        if len(data) > limit:
+            raise InputFileError(f"{what} -: standard input holds more than such a file can be "
+                                 f"({limit / 2**20:.0f} MiB)", USAGE)
+        _STDIN.update(stream=stream, text=_decoded(data, what, "(standard input)"))
+    return _STDIN["text"]
+
+
+def _decoded(data: bytes, what: str, path) -> str:
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:

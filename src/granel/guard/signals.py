@@ -63,6 +63,17 @@ def dask_setup(worker=None):  # dask's preload hook: `distributed.worker.preload
     worker_setup()
 
 
+MAX_WORKERS = 1024  # local worker processes a study may start
+
+
+def check_workers(workers: int) -> None:
+    """InputError unless `workers` is a whole number of local worker processes from 1 to MAX_WORKERS."""
+    from .exits import InputError
+
+    if not 1 <= workers <= MAX_WORKERS:
+        raise InputError(f"--workers {workers}: give a whole number of worker processes from 1 to {MAX_WORKERS}")
+
+
 def local_cluster(workers: int):
     """A LocalCluster of `workers` single-thread processes whose workers run `worker_setup`
     (ignore the terminal's Ctrl-C, quiet logs), with the parent's dask logging quiet too."""

@@ -3,9 +3,11 @@
 Every file granel writes goes through `atomic_path`: the data goes to a temporary file in the
 same folder (named `.granel-HASH-TOKEN.tmp`: short whatever the target's name, and naming the
 writing process by `owners.process_token`), which is flushed to disk, checked against the target
-(never over a read-only or special file), renamed over it, and the folder synced. A full disk
-removes the temporary and raises `FileError` (exit 4) naming the file; temporaries of processes
-that died are removed by the next write in their folder (`remove_stale_temporaries`).
+(never over a read-only or special file), renamed over it, and the folder synced. A full disk, or
+any other refusal of the system (a file-size limit, too many open files), removes the temporary
+and raises `FileError` (exit 4) naming the file; temporaries of processes that died are removed
+by the next write in their folder (`remove_stale_temporaries`). A temporary file is writable by
+its writer whatever the umask; the file it becomes gets the umask's permissions.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from .exits import FILES, FileError, is_no_space
+from .exits import FILES, FileError, GranelError, describe, is_no_space
 from .owners import process_token, token_state
 
 PREFIX, SUFFIX = ".granel-", ".tmp"
@@ -84,11 +86,18 @@ def no_space(path: Path, e: BaseException) -> FileError:
     return FileError(f"{path}: no space left on the device{extra}; nothing was written there", FILES)
 
 
+def not_written(path: Path, e: OSError) -> FileError:
+    """The one-line error of a write to `path` that the system refused (the file too large for
+    the process's limit, too many open files, ...), naming the file and the limit."""
+    return FileError(f"{path}: {describe(e)}; nothing was written there", FILES)
+
+
 @contextmanager
 def atomic_path(path: str | Path, check: bool = True, keep_suffix: bool = False):
     """Yield a temporary path beside `path`; when the block ends without error, sync it and
     rename it over `path` (refused, with FileError, where `replace_refusal` objects and `check`
-    is set); on any error, or a stop, remove it. A full disk becomes FileError (exit 4).
+    is set); on any error, or a stop, remove it. A full disk, and any other OSError of the
+    block, becomes FileError (exit 4) naming `path`.
     `keep_suffix`: the temporary ends in the target's suffix too (for writers that pick the
     format from the name)."""
     target = target_of(path)
@@ -98,11 +107,14 @@ def atomic_path(path: str | Path, check: bool = True, keep_suffix: bool = False)
         remove_stale_temporaries(folder)
         fd, tmp = tempfile.mkstemp(prefix=f"{PREFIX}{_digest(target.name)}-{process_token()}-",
                                    suffix=SUFFIX + (target.suffix if keep_suffix else ""), dir=folder)
-        os.close(fd)
+        try:
+            os.fchmod(fd, 0o600)  # writable by its writer whatever the umask (the file gets the umask's in the end)
+        finally:
+            os.close(fd)
     except OSError as e:
         if is_no_space(e):
             raise no_space(target, e) from None
-        raise
+        raise not_written(target, e) from None
     try:
         yield tmp
         _set_mode(tmp, target)
@@ -119,6 +131,8 @@ def atomic_path(path: str | Path, check: bool = True, keep_suffix: bool = False)
             pass
         if isinstance(e, Exception) and is_no_space(e):
             raise no_space(target, e) from None
+        if isinstance(e, OSError) and not isinstance(e, GranelError):
+            raise not_written(target, e) from None
         raise
 
 
