@@ -45,7 +45,8 @@ def campaign(trials: int, workers: int, warm: bool, design: Path) -> dict:
 
 
 def study_figures(design: Path, out: Path) -> dict:
-    from granel.studies.design import load_design, open_study
+    from granel.studies.design import load_design
+    from granel.studies.design_search import open_study
     from granel.studies.design_report import screening_summary, study_speed
 
     spec, _ = load_design(design)

@@ -26,6 +26,7 @@ from granel.analysis import (
     time_averaged_accumulation,
 )
 from granel.cli import app
+from granel.solid.base import Material, Slab
 from granel.solid.beam import build_beam
 from granel.scenario import build_solid
 from granel.solid.modal import modal_analysis
@@ -109,7 +110,7 @@ def test_nonreciprocity_index():
 
 def test_a_pure_mode_keeps_its_energy():
     """Modal coordinates of a vibrating single mode: all energy in that mode, constant in time."""
-    beam = build_beam(0, 0, 0.01, 0.1, 0.001, 200e9, 7850, [("c", "left", 0.05)], 40)
+    beam = build_beam(Slab(0, 0, 0.01, 0.1, 0.001), Material(200e9, 7850, 0.3), [("c", "left", 0.05)], 40)
     md = modal_analysis(beam)
     k, A = 2, 3e-6
     w = md.omega[k]
@@ -134,7 +135,7 @@ def test_a_pure_mode_keeps_its_energy():
 
 def test_energy_densities_integrate_back_to_the_total():
     rng = np.random.default_rng(2)
-    beam = build_beam(0, 0, 0.01, 0.1, 0.001, 200e9, 7850, [("c", "left", 0.05)], 40)
+    beam = build_beam(Slab(0, 0, 0.01, 0.1, 0.001), Material(200e9, 7850, 0.3), [("c", "left", 0.05)], 40)
     q, v = rng.normal(size=beam.ndof) * 1e-6, rng.normal(size=beam.ndof)
     xs, ys, w = beam_energy_density_grid(beam, q, v, nx=401)
     # integrate across the width (trapezoid on the fine grid) and along each element
@@ -159,10 +160,11 @@ def test_energy_densities_integrate_back_to_the_total():
 
 @pytest.fixture(scope="module")
 def short_study(tmp_path_factory):
-    from granel.studies.paper import paper_study
+    from granel.studies.paper import PaperOptions, paper_study
 
     out = tmp_path_factory.mktemp("paper")
-    res = paper_study(out, animations=True, extra=['simulation.duration="0.06ms"'], frames=4, fig11_window=2.5e-5)
+    options = PaperOptions(animations=True, extra=('simulation.duration="0.06ms"',), frames=4, fig11_window=2.5e-5)
+    res = paper_study(out, options)
     return out, res
 
 

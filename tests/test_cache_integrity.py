@@ -1,4 +1,4 @@
-"""granel's own cache is checked before it is used (solid.mode_cache's checked cache files, granel.guard.jit's
+"""granel's own cache is checked before it is used (solid.cache_files's checked cache files, granel.guard.jit's
 manifest of numba's files): a damaged entry is rebuilt, never used; a cache that cannot be
 written is skipped with a note; a lock of a dead holder is taken over at once, and a wait for a
 live one is announced and bounded."""
@@ -19,7 +19,8 @@ from granel.guard import jit
 from granel import scenario as S
 from granel.guard.owners import process_token, start_ticks
 from granel.run import run_scenario
-from granel.solid import mode_cache, modal
+from granel.solid import cache_files, cache_lock, mode_cache, modal
+from granel.solid.base import Material, Slab
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate, build_plate
 
 # a coarse plate (752 DOFs) at fixed 100 ns steps over 0.05 ms, strong shock on SSGM:C: the run
@@ -57,7 +58,7 @@ def damage(path: Path, how: str) -> None:
     """Truncate the file to half, zero its second half (its size kept: blocks never written),
     flip one bit in its middle, or remove its check record (a file of an older cache)."""
     if how == "no record":
-        mode_cache.check_path(path).unlink()
+        cache_files.check_path(path).unlink()
         return
     data = bytearray(path.read_bytes())
     half = len(data) // 2
@@ -86,9 +87,9 @@ def test_a_damaged_cache_file_is_rebuilt_and_the_run_equals_the_clean_one(clean,
         shutil.copy2(f, cache / f.name)
     (target,) = cache.glob(ENTRIES[entry])
     damage(target, how)
-    with pytest.warns(mode_cache.CacheNote, match=f"cache: {target.name}"):
+    with pytest.warns(cache_files.CacheNote, match=f"cache: {target.name}"):
         got = outcome(run_scenario(S.load("paper", COARSE)))
-    assert mode_cache.verify(target) is None  # written again, with its record
+    assert cache_files.verify(target) is None  # written again, with its record
     for name in FIELDS:
         assert np.array_equal(got[name], expected[name]), name
     assert np.abs(got["energy_solid"]).max() > 0
@@ -98,46 +99,45 @@ def test_a_damaged_cache_file_is_rebuilt_and_the_run_equals_the_clean_one(clean,
 def test_a_damaged_scale_record_is_never_a_base(cache, how):
     """A set whose scale-free record is damaged does not serve a proportional solid: that solid's
     modes are computed, and the damaged set is removed."""
-    args = (0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, [LayerSpec("A", "left", 0.05, 1e-3)],
+    args = (Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), [LayerSpec("A", "left", 0.05, 1e-3)],
             PlateMesh(2, 2.5, 8e-3))
     mode_cache.all_modes(build_plate(*args))
     (record,) = cache.glob("modes-*.scale.npz")
     damage(record, how)
-    with pytest.warns(mode_cache.CacheNote, match=f"{record.name}.*removed"):
-        thicker = mode_cache.all_modes(build_plate(*args[:4], 0.0013, *args[5:]))
+    with pytest.warns(cache_files.CacheNote, match=f"{record.name}.*removed"):
+        thicker = mode_cache.all_modes(build_plate(Slab(0.0, 0.0, 0.01, 0.1, 0.0013), *args[1:]))
     assert thicker.origin == "computed" and not record.exists()
     (base,) = cache.glob("modes-*.scale.npz")  # the thicker plate's own
-    assert mode_cache.verify(base) is None
+    assert cache_files.verify(base) is None
 
 
 def test_a_record_lost_alone_is_written_again(cache):
     """The modes' own files intact, their scale record damaged: the modes serve, the record is
     written again."""
-    plate = build_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, [LayerSpec("A", "left", 0.05, 1e-3)],
-                        PlateMesh(2, 2.5, 8e-3))
+    plate = build_plate(Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), [LayerSpec("A", "left", 0.05, 1e-3)], PlateMesh(2, 2.5, 8e-3))
     mode_cache.all_modes(plate)
     (record,) = cache.glob("modes-*.scale.npz")
     damage(record, "bit-flipped")
-    with pytest.warns(mode_cache.CacheNote, match="writing it again"):
+    with pytest.warns(cache_files.CacheNote, match="writing it again"):
         assert mode_cache.all_modes(plate).origin == "cache"
-    assert mode_cache.verify(record) is None
+    assert cache_files.verify(record) is None
 
 
 def test_every_cache_file_has_its_check_record(clean):
     _, folder = clean
-    data = [f for f in folder.iterdir() if not f.name.endswith(mode_cache.CHECK_SUFFIX)]
+    data = [f for f in folder.iterdir() if not f.name.endswith(cache_files.CHECK_SUFFIX)]
     assert len(data) == 4  # the plate, the modes' frequencies, shapes and scale record
     for f in data:
-        record = json.loads(mode_cache.check_path(f).read_text())
-        assert record["size"] == f.stat().st_size and record["crc32"] == mode_cache.file_crc32(f)[1]
+        record = json.loads(cache_files.check_path(f).read_text())
+        assert record["size"] == f.stat().st_size and record["crc32"] == cache_files.file_crc32(f)[1]
 
 
 def test_pruning_removes_a_file_with_its_record(cache):
     for name in ("plate-a-1.npz", "plate-a-2.npz"):
-        mode_cache.write_checked(cache / name, np.zeros(1000))
+        cache_files.write_checked(cache / name, np.zeros(1000))
         os.utime(cache / name, (1e9, 1e9))
     (cache / "plate-a-3.npz.sum").write_text("{}")  # a record left without its file
-    removed = mode_cache.prune_cache(keep=(cache / "plate-a-2.npz",), limit=0)
+    removed = cache_files.prune_cache(keep=(cache / "plate-a-2.npz",), limit=0)
     assert [p.name for p in removed] == ["plate-a-1.npz"]
     assert sorted(p.name for p in cache.iterdir()) == ["plate-a-2.npz", "plate-a-2.npz.sum"]
 
@@ -147,14 +147,14 @@ def test_pruning_removes_a_file_with_its_record(cache):
 
 def small_plate():
     layers = [LayerSpec("a", "left", 0.05, 0.001), LayerSpec("b", "right", 0.04, 0.001)]
-    return (0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, PlateMesh(2, 2.5, 8e-3))
+    return (Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), layers, PlateMesh(2, 2.5, 8e-3))
 
 
 def test_a_cache_path_that_is_a_file_is_skipped_with_a_note(tmp_path, monkeypatch):
     blocker = tmp_path / "cache"
     blocker.write_text("not a folder")
     monkeypatch.setenv("GRANEL_CACHE", str(blocker))
-    with pytest.warns(mode_cache.CacheNote, match="is a file, not a folder.*without the cache"):
+    with pytest.warns(cache_files.CacheNote, match="is a file, not a folder.*without the cache"):
         plate = build_plate(*small_plate())
         modes = mode_cache.all_modes(plate)
     assert modes.origin == "computed" and modes.count == plate.ndof
@@ -165,8 +165,8 @@ def test_a_full_disk_is_skipped_with_a_note_and_leaves_no_temporaries(cache, mon
     def full(path, array):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(mode_cache, "_write_npy", full)
-    with pytest.warns(mode_cache.CacheNote, match="no space left"):
+    monkeypatch.setattr(cache_files, "_write_npy", full)
+    with pytest.warns(cache_files.CacheNote, match="no space left"):
         plate = build_plate(*small_plate())
         assert mode_cache.all_modes(plate).origin == "computed"
     assert list(cache.iterdir()) == []
@@ -194,9 +194,10 @@ def test_a_read_only_cache_is_skipped_with_a_note(monkeypatch):
     import tempfile
 
     folder = Path(tempfile.mkdtemp(prefix="granel-ro-"))
-    code = ("from granel.solid import mode_cache\nfrom granel.solid.plate import LayerSpec, PlateMesh, build_plate\n"
+    code = ("from granel.solid import mode_cache\nfrom granel.solid.base import Material, Slab\n"
+            "from granel.solid.plate import LayerSpec, PlateMesh, build_plate\n"
             "layers = [LayerSpec('a', 'left', 0.05, 0.001), LayerSpec('b', 'right', 0.04, 0.001)]\n"
-            "plate = build_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, PlateMesh(2, 2.5, 8e-3))\n"
+            "plate = build_plate(Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), layers, PlateMesh(2, 2.5, 8e-3))\n"
             "print(mode_cache.all_modes(plate).origin)\n")
     env = {**os.environ, "GRANEL_CACHE": str(folder), "PYTHONDONTWRITEBYTECODE": "1"}
     command = [sys.executable, "-c", code]
@@ -241,8 +242,8 @@ def _read_only_in_process(folder: Path, monkeypatch) -> None:
     monkeypatch.setenv("GRANEL_CACHE", str(folder))
     monkeypatch.setattr(os, "open", fake_open)
     monkeypatch.setattr(os, "mkdir", fake_mkdir)
-    monkeypatch.setattr(mode_cache, "_NOTED", set())
-    with pytest.warns(mode_cache.CacheNote, match="cannot be written.*computing without the cache"):
+    monkeypatch.setattr(cache_files, "_NOTED", set())
+    with pytest.warns(cache_files.CacheNote, match="cannot be written.*computing without the cache"):
         plate = build_plate(*small_plate())
         origin = mode_cache.all_modes(plate).origin
     monkeypatch.undo()
@@ -268,7 +269,7 @@ def test_granel_run_with_the_cache_path_a_file_completes(tmp_path):
 
 @pytest.fixture
 def plate(cache, monkeypatch):
-    monkeypatch.setattr(mode_cache, "LOCK_POLL_S", 0.02)
+    monkeypatch.setattr(cache_lock, "LOCK_POLL_S", 0.02)
     return assemble_plate(*small_plate())
 
 
@@ -307,12 +308,12 @@ def test_a_wait_is_announced_once_and_bounded(plate, monkeypatch):
     """A live holder (this process's token) that never finishes: the waiter says what it waits for
     and for whom, gives up at LOCK_WAIT_S after the lock was taken, computes the modes itself and
     leaves the holder's lock and the storing to it."""
-    monkeypatch.setattr(mode_cache, "LOCK_WAIT_S", 0.3)
+    monkeypatch.setattr(cache_lock, "LOCK_WAIT_S", 0.3)
     lock = lock_of(plate, process_token())
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         modes = mode_cache.all_modes(plate)
-    notes = [str(w.message) for w in seen if issubclass(w.category, mode_cache.CacheNote)]
+    notes = [str(w.message) for w in seen if issubclass(w.category, cache_files.CacheNote)]
     assert len(notes) == 1 and "waiting for the modes of a plate of 408 DOFs" in notes[0]
     assert f"process {os.getpid()} on this host" in notes[0] and "at most until" in notes[0]
     assert modes.origin == "computed" and lock.exists()
@@ -320,15 +321,15 @@ def test_a_wait_is_announced_once_and_bounded(plate, monkeypatch):
 
 
 def test_a_holder_older_than_the_bound_is_not_waited_for(plate, monkeypatch):
-    lock = lock_of(plate, process_token(), since=time.time() - mode_cache.LOCK_WAIT_S - 60)
-    with pytest.warns(mode_cache.CacheNote, match="longer than 600 s; computing them here too"):
+    lock = lock_of(plate, process_token(), since=time.time() - cache_lock.LOCK_WAIT_S - 60)
+    with pytest.warns(cache_files.CacheNote, match="longer than 600 s; computing them here too"):
         assert mode_cache.all_modes(plate).origin == "computed"
     assert lock.exists()
 
 
 def test_a_lock_of_another_host_is_stale_after_the_bound(plate, monkeypatch):
     lock = lock_of(plate, "ffffffff-1234-5678")  # no host hashes to that
-    old = time.time() - mode_cache.LOCK_WAIT_S - 60
+    old = time.time() - cache_lock.LOCK_WAIT_S - 60
     os.utime(lock, (old, old))
     monkeypatch.setattr(mode_cache, "_wait_for", no_wait)
     assert mode_cache.all_modes(plate).origin == "computed" and not lock.exists()

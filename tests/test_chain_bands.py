@@ -252,8 +252,10 @@ def test_the_spectrum_dataset_carries_the_band_measures_with_units():
     same grid step as the linearised chain's exact one; units on every band variable, the
     infinite chain's cut-off, and a report with the table. Without a chain the measured figures
     stand alone and the report says why."""
-    from granel.studies.spectrum import BAND_MEASURES, case_metric_units, spectrum_dataset, spectrum_report
-    from granel.studies.sweep import cases, spectrum_sweep, summary_dataset
+    from granel.studies.spectrum import BAND_MEASURES, case_metric_units, spectrum_dataset
+    from granel.studies.spectrum_report import spectrum_report
+    from granel.studies.spectrum_study import spectrum_sweep
+    from granel.studies.sweep import cases, summary_dataset
 
     K, m = 1.2e7, 4.1e-3
     chain = hand_chain([m] * 6, [K] * 5, [2.0] * 5, (ChainEnd(), ChainEnd("far", 2 * K, 4.0)))
@@ -292,7 +294,7 @@ def spectrum_of(tmp_path, radii, alpha, frequencies, cycles):
     """`granel spectrum`'s study (forward only: drive C:1, measure the last bead, which presses
     on the wall "far"), 0.1 N against 10 N, from the Python API; returns the spectrum Dataset and
     its report."""
-    from granel.studies.sweep import run_spectrum, spectrum_sweep
+    from granel.studies.spectrum_study import run_spectrum, spectrum_sweep
 
     loads = f"""[[excitations]]
 granule = "C:1"

@@ -125,7 +125,8 @@ def test_construction_facts_of_the_paper_scenario():
         problem = S.build_problem(sc)
         system = problem.system
         t, zero = np.linspace(0, 1e-4, 5), np.zeros((5, system.n))
-        attrs = {"scenario": S.to_toml(sc), "solver_name": solver, "solver_integrator": "exact", "solver_adaptive": 1}
+        attrs = {"scenario": S.to_toml(sc), "solver_name": solver, "solver_integrator": "exact", "solver_adaptive": 1,
+                 "solver_ledger_tol": sc.simulation.ledger_tol}
         ds = xr.Dataset({"input_work": ("time", np.linspace(0, 1e-3, 5)), "v_x": (("time", "granule"), zero),
                          "v_y": (("time", "granule"), zero), "omega": (("time", "granule"), zero),
                          "medium": ("granule", np.array([system.media[k] for k in system.medium_index], object))},

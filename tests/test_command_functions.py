@@ -13,6 +13,8 @@ import pytest
 import granel.run as R
 import granel.studies.spectrum as SP
 import granel.studies.sweep as SW
+import granel.studies.spectrum_report as SR
+import granel.studies.spectrum_study as SS
 from granel import scenario as S
 from granel.analysis.reciprocity import reciprocity_metrics
 from granel.guard.exits import FILES, STOPPED, GranelError, InputError, NotWritten
@@ -130,7 +132,7 @@ def test_an_unbuildable_solid_is_a_scenario_error_naming_the_solid(monkeypatch):
 
 
 def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude(tmp_path, monkeypatch):
-    spec = SW.spectrum_sweep("paper", ['solid.kind="rigid"'], [1e3, 2e3], [10.0], drive="LSGM:3", measure="SSGM:C",
+    spec = SS.spectrum_sweep("paper", ['solid.kind="rigid"'], [1e3, 2e3], [10.0], drive="LSGM:3", measure="SSGM:C",
                              both_directions=True, cycles=20.0, window_cycles=5.0, ramp_cycles=2.0,
                              samples_per_period=16)
     assert spec.mode == "spectrum" and spec.overrides == ['solid.kind="rigid"']
@@ -140,9 +142,9 @@ def test_spectrum_sweep_is_a_sweep_in_spectrum_mode_over_frequency_and_amplitude
     from pydantic import ValidationError
 
     with pytest.raises(ValidationError, match="window"):
-        SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C", cycles=4.0)
+        SS.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C", cycles=4.0)
     monkeypatch.chdir(tmp_path)
-    spec = SW.spectrum_sweep("mine.toml", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    spec = SS.spectrum_sweep("mine.toml", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     assert (spec.name, spec.base) == ("spectrum of mine", str(tmp_path.resolve() / "mine.toml"))  # by its absolute path
 
 
@@ -157,24 +159,24 @@ def _written(calls):
 def test_run_spectrum_runs_the_cases_beside_the_spectrum_then_writes_it(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(SW, "run_spec", lambda spec, base, out, *a: calls.append(("run", base, out)) or "summary")
-    monkeypatch.setattr(SW, "write_spectrum", _written(calls))
-    spec = SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    monkeypatch.setattr(SS, "write_spectrum", _written(calls))
+    spec = SS.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     path = tmp_path / "sp.nc"
     with pytest.raises(NotWritten) as e:
-        SW.run_spectrum(spec, path)
+        SS.run_spectrum(spec, path)
     assert calls == [("run", Path("."), tmp_path / "sp.cases"), ("write", "summary", path)]
-    assert SW.cases_folder(path) == tmp_path / "sp.cases"
+    assert SS.cases_folder(path) == tmp_path / "sp.cases"
     assert e.value.what == "the spectrum" and isinstance(e.value.cause, PermissionError)
 
 
 def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(SW, "run_spec", lambda spec, base_dir, out, *a: calls.append(("run", out)) or "summary")
-    monkeypatch.setattr(SW, "write_spectrum", _written(calls))
+    monkeypatch.setattr(SR, "write_spectrum", _written(calls))  # spectrum mode writes it (`StudyMode.finish_sweep`)
     plain = SW.SweepSpec.model_validate({"base": "paper", "axes": [{"field": "contact.mu", "values": [0.1]}]})
     assert SW.sweep_study(plain, tmp_path, tmp_path / "out") == "summary" and calls == [("run", tmp_path / "out")]
     calls.clear()
-    spec = SW.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
+    spec = SS.spectrum_sweep("paper", [], [1e3], [10.0], drive="LSGM:3", measure="SSGM:C")
     with pytest.raises(NotWritten) as e:
         SW.sweep_study(spec, tmp_path, tmp_path / "out")
     assert calls == [("run", tmp_path / "out"), ("write", "summary", tmp_path / "out" / "spectrum.nc")]
@@ -185,16 +187,15 @@ def test_sweep_study_writes_the_spectrum_of_a_spectrum_sweep_only(tmp_path, monk
 
 
 def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
-    import granel.studies.design as D
     import granel.studies.design_report as DR
+    import granel.studies.design_search as D
 
     calls = []
 
-    def run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=None, progress=None, check=True,
-                   confirming=None, finishing=None):  # a study stopped early: no `finishing`
-        calls.append(("trials", trials, workers, scheduler, max_wall, check))
-        progress(0, "ok", 1, 1)
-        confirming(1, 1)
+    def run_design(spec, base_dir, out, trials=None, options=None, check=True):  # a study stopped early: no `finishing`
+        calls.append(("trials", trials, options.workers, options.scheduler, options.max_wall, check))
+        options.progress(0, "ok", 1, 1)
+        options.confirming(1, 1)
         return {"study": "study", "files": ["trials.nc"]}
 
     def write_study_report(spec, base_dir, study, out, rows=None):
@@ -203,9 +204,9 @@ def test_design_study_reports_after_the_trials(tmp_path, monkeypatch):
 
     monkeypatch.setattr(D, "run_design", run_design)
     monkeypatch.setattr(DR, "write_study_report", write_study_report)
-    res = DR.design_study("spec", tmp_path, tmp_path / "out", 3, 1, None, max_wall=9.0,
-                          progress=lambda *a: calls.append(("progress", a)),
-                          reporting=lambda: calls.append("reporting"), confirming=lambda *a: calls.append(("confirm", a)))
+    options = D.DesignRunOptions(1, None, max_wall=9.0, progress=lambda *a: calls.append(("progress", a)),
+                                 confirming=lambda *a: calls.append(("confirm", a)))
+    res = DR.design_study("spec", tmp_path, tmp_path / "out", 3, options, reporting=lambda: calls.append("reporting"))
     assert calls == [("trials", 3, 1, None, 9.0, False), ("progress", (0, "ok", 1, 1)), ("confirm", (1, 1)), "reporting",
                      ("report", "study", None)]
     assert res["files"] == ["trials.nc", "report.md"]

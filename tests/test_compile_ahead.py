@@ -9,6 +9,14 @@ from pathlib import Path
 
 import pytest
 
+
+@pytest.fixture(autouse=True)
+def _default_numba_cache(monkeypatch):
+    """These tests compile into the default cache folder beside their package (NUMBA_CACHE_DIR
+    unset): in this process, where they look for the files, as in the children they start."""
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+
+
 KERNEL = """\
 from pathlib import Path
 from granel.guard.jit import cached_njit

@@ -103,10 +103,11 @@ def test_the_inverse_problem_lands_on_the_known_radius(tmp_path):
     """60 trials of the auto sampler (TPE, then the local refinement) find the radius whose peak
     force is the target within 1 % of the closed form (seeds 1-4 measured at -1.0e-4, the recorded
     peak's own sampling bias; TPE alone within 0.23 %), on 2 workers; best.toml runs as it is."""
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     spec, base = load_design(write_design(tmp_path))
-    res = run_design(spec, base, tmp_path / "out", workers=2)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=2))
     ds = res["trials"]
     assert ds.sizes["trial"] == 60 and (ds["status"].values == "ok").all()
     best = res["best"][0]
@@ -125,18 +126,19 @@ def test_a_killed_study_resumes_to_the_same_trials(tmp_path):
     """With one worker and a seed, a study stopped after 4 trials with a fifth in flight (asked,
     never told: the state a kill leaves) ends, when rerun, with the same finished trials as an
     uninterrupted one: the stale trial is marked interrupted and replayed with its values."""
-    from granel.studies.design import ask_trial, load_design, open_study, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, ask_trial, open_study, run_design
 
     spec, base = load_design(write_design(tmp_path, trials=9, seed=5))
-    straight = run_design(spec, base, tmp_path / "a", workers=1)["trials"]
-    run_design(spec, base, tmp_path / "b", trials=4, workers=1)
+    straight = run_design(spec, base, tmp_path / "a", options=DesignRunOptions(workers=1))["trials"]
+    run_design(spec, base, tmp_path / "b", trials=4, options=DesignRunOptions(workers=1))
     study = open_study(spec, tmp_path / "b")
     ask_trial(study, spec, {v.field: v.distribution() for v in spec.variables})  # in flight when killed
-    resumed = run_design(spec, base, tmp_path / "b", workers=1)["trials"]
+    resumed = run_design(spec, base, tmp_path / "b", options=DesignRunOptions(workers=1))["trials"]
     assert _params(resumed) == _params(straight) and len(_params(straight)) == 9
     assert list(resumed["status"].values).count("interrupted") == 1
     # a rerun with nothing left to do changes nothing
-    again = run_design(spec, base, tmp_path / "b", workers=1)["trials"]
+    again = run_design(spec, base, tmp_path / "b", options=DesignRunOptions(workers=1))["trials"]
     assert again.sizes["trial"] == resumed.sizes["trial"]
 
 
@@ -217,7 +219,8 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     front's span, 96 NSGA-II trials (seed 1, generations of 16) give a front whose every point
     lies within 0.05 of the true one and which leaves no part of it farther than 0.25 from a
     point found."""
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     var = ('[[variables]]\nfield = "media.0.radius"\nlow = 0.003\nhigh = 0.005\n'
            '[[variables]]\nfield = "excitations.0.fmax"\nlow = 5.0\nhigh = 20.0\n')
@@ -229,7 +232,7 @@ def test_two_objectives_find_the_analytic_pareto_front(tmp_path):
     (tmp_path / "impact.toml").write_text(IMPACT.replace("gap = 1e-6", "gap = 5e-6").replace('"600us"', '"900us"'))
     spec, base = load_design(path)
     assert spec.sampler == "nsga2" and len(spec.objectives) == 2
-    res = run_design(spec, base, tmp_path / "out", workers=2)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=2))
     from granel.studies.design_report import write_study_report
 
     write_study_report(spec, base, res["study"], tmp_path / "out")
@@ -301,7 +304,8 @@ def test_a_spectrum_objective_tunes_a_contact_resonance(tmp_path):
     the mobility measured by granel's lock-in on the steady window, lands within 1 % (measured
     +0.40 %, where the measured mobility peaks; TPE alone +0.72 %: the peak is flat, 1 % in F0 is
     0.2 dB); the trial's metrics are the declared band metrics."""
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
     from granel.studies.modes import study_mode
 
     (tmp_path / "reso.toml").write_text(RESONATOR)
@@ -326,7 +330,7 @@ metric = "mobility_fwd_db"
 direction = "maximize"
 """)
     spec, base = load_design(tmp_path / "d.toml")
-    res = run_design(spec, base, tmp_path / "out", workers=1)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=1))
     m, w = 4 / 3 * math.pi * 0.005**3 * 7850, 2 * math.pi * 1e4
     A = 4 / 3 * 200e9 / (1 - 0.3**2) * math.sqrt(0.005)
     f0 = (m * w**2 / (1.5 * A ** (2 / 3))) ** 3
@@ -342,11 +346,12 @@ def test_a_constraint_keeps_the_best_design_feasible(tmp_path):
     """The inverse problem with its answer (R = 6.31 mm, 8.27 g) ruled out by a mass limit of
     6 g (R <= 5.68 mm): the best design obeys the limit and sits at it (within 3 % in R, where the
     force is closest to the target), and infeasible trials are marked so in trials.nc."""
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     path = write_design(tmp_path, trials=40, seed=4, extra='[[constraints]]\nmetric = "granular_mass_kg"\nmax = 0.006\n')
     spec, base = load_design(path)
-    res = run_design(spec, base, tmp_path / "out", workers=2)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=2))
     r_max = (0.006 / (4 / 3 * math.pi * 7850)) ** (1 / 3)
     best = res["best"][0].params["media.0.radius"]
     assert best <= r_max and best == pytest.approx(r_max, rel=0.03)
@@ -359,7 +364,8 @@ def test_a_study_from_an_older_granel_is_still_this_design(tmp_path):
     """A study stored before a field was added (here `population` and `frequencies`) continues:
     the stored fields must match and the new ones be at their defaults; a changed value is
     another design."""
-    from granel.studies.design import load_design, same_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import same_design
 
     spec, _ = load_design(write_design(tmp_path))
     mine = json.loads(spec.model_dump_json(exclude={"trials"}))

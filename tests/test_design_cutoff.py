@@ -113,7 +113,8 @@ def test_the_cutoff_metric_is_a_run_metric_with_its_reason_when_nan(tmp_path):
     """`cutoff_Hz` is a run-mode case metric: the sweep engine reports it for the chain, and a
     run without a precompressed chain reports NaN with its reason under `notes`, which a design
     trial's failure then quotes."""
-    from granel.studies.design import load_design, score
+    from granel.studies.design import load_design
+    from granel.studies.design_trials import score
     from granel.studies.modes import study_mode
     from granel.studies.sweep import CaseSpec, run_case
 
@@ -206,7 +207,8 @@ def test_the_design_file_is_accepted_and_a_bad_tied_field_is_refused(tmp_path):
     """scenarios/designs/cutoff.toml passes the design checks (its metric is a run-mode metric,
     its tied fields exist in the base); in reciprocity mode the metric is refused, and a tied
     field the base lacks or a field tied twice exits 2 naming it, before anything runs."""
-    from granel.studies.design import check_design, load_design, trial_case
+    from granel.studies.design import check_design, load_design
+    from granel.studies.design_trials import trial_case
 
     spec, base = load_design(DESIGN)
     check_design(spec, base)
@@ -233,13 +235,14 @@ def test_the_study_finds_the_radius_of_a_12_khz_cutoff(tmp_path):
     and best.toml runs as it is with its eight radii equal. One worker, so that the study is
     reproducible (seed 1: -0.08 %; seeds 1-6 within 0.52 %, 23-29 s a study; on 2 workers, whose
     trials finish in varying order, seeds 1-6 land within 0.74 %)."""
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     r_star = radius_for(TARGET_HZ)
     assert r_star == pytest.approx(6.5883e-3, rel=1e-4)
     spec, base = load_design(DESIGN)
     assert spec.trials == 60 and spec.sampler == "tpe"
-    res = run_design(spec, base, tmp_path / "out", workers=1)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=1))
     ds = res["trials"]
     assert ds.sizes["trial"] == 60 and (ds["status"].values == "ok").all()
     best = res["best"][0].params["media.0.radii.0"]

@@ -15,7 +15,9 @@ from typer.testing import CliRunner
 
 from granel.cli import app
 from granel.studies.design import (BOUND_SHARE, TARGET_TOLERANCE, DesignFileError, DesignSpec, VariableSpec,
-                           check_variables_matter, design_differences, design_warnings, load_design, open_study)
+                                   check_variables_matter, load_design)
+from granel.studies.design_search import design_differences, open_study
+from granel.studies.design_trials import design_warnings
 from test_design import TARGET_N, peak_force, write_design
 
 runner = CliRunner()
@@ -67,7 +69,7 @@ def test_a_best_at_a_bound_and_a_missed_target_are_warned(tmp_path):
     """Trial 1 is the best (misfit 0.2, above the 1 % tolerance) at 0.5 % of the log range from
     the low bound: both said, with its numbers; a best at 2 % of the range meeting the target
     (misfit 0.004) gives no warning, unless the objective asks for 0.001."""
-    from granel.studies.design import best_trials
+    from granel.studies.design_trials import best_trials
 
     spec, _ = load_design(write_design(tmp_path))
     low = 0.002 * 4 ** 0.005
@@ -90,7 +92,7 @@ def test_a_pareto_front_and_an_infeasible_study_are_warned(tmp_path):
     """On a front, the designs at a bound are counted and a target is missed only when every
     design of the front misses it; a study whose finished trials all break a constraint has no
     best design, and says so."""
-    from granel.studies.design import best_trials
+    from granel.studies.design_trials import best_trials
 
     path = write_design(tmp_path, extra='[[objectives]]\nmetric = "input_work_J"\ndirection = "maximize"\n')
     spec, _ = load_design(path)
@@ -297,12 +299,12 @@ def test_repeated_values_reuse_their_case_with_no_solver_time(tmp_path):
     reuse them, marked `reused` in trials.nc with no solver time; every fresh trial spends at most
     its case time in the solver and at most its launch-to-result time in its case, so the share
     outside the solver lies in [0, 1] and the report says how many trials reused a case."""
-    from granel.studies.design import run_design
+    from granel.studies.design_search import DesignRunOptions, run_design
     from granel.studies.design_report import study_speed, write_study_report
 
     var = '[[variables]]\nfield = "media.0.radius"\nchoices = [0.004, 0.006]\n'
     spec, base = load_design(write_design(tmp_path, trials=6, seed=1, variables=var))
-    res = run_design(spec, base, tmp_path / "out", workers=1)
+    res = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=1))
     ds = res["trials"]
     reused = ds["reused"].values
     assert ds.sizes["trial"] == 6 and (ds["status"].values == "ok").all() and reused.sum() >= 4

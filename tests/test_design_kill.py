@@ -17,7 +17,8 @@ def _finished(out):
     """{trial number: (params, values)} of the complete trials in out's journal."""
     from optuna.trial import TrialState
 
-    from granel.studies.design import load_design, open_study
+    from granel.studies.design import load_design
+    from granel.studies.design_search import open_study
 
     spec, _ = load_design(out.parent / "d.toml")
     study = open_study(spec, out)
@@ -26,7 +27,8 @@ def _finished(out):
 
 @pytest.mark.slow
 def test_a_study_killed_on_two_workers_loses_no_finished_trial(tmp_path):
-    from granel.studies.design import load_design, run_design
+    from granel.studies.design import load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     path = write_design(tmp_path, trials=60, seed=3)
     out = tmp_path / "out"
@@ -44,7 +46,7 @@ def test_a_study_killed_on_two_workers_loses_no_finished_trial(tmp_path):
     before = _finished(out)
     assert 4 <= len(before) < 60, "the study was not caught mid-way"
     spec, base = load_design(path)
-    res = run_design(spec, base, out, workers=2)
+    res = run_design(spec, base, out, options=DesignRunOptions(workers=2))
     after = _finished(out)
     for number, held in before.items():  # every trial finished before the kill, unchanged
         assert after[number] == held

@@ -41,12 +41,13 @@ def test_the_best_are_confirmed_at_the_design_s_accuracy(tmp_path):
     run, so equal to the last bit), the reported best is the best confirmation, and the report
     and trials.nc show both fidelities."""
     from granel.studies.screening import screened_ranking
-    from granel.studies.design import (DesignSpec, evaluate_trial, load_design, run_design,
-                                       trial_case)
+    from granel.studies.design import DesignSpec, load_design
+    from granel.studies.design_search import DesignRunOptions, run_design
+    from granel.studies.design_trials import evaluate_trial, trial_case
     from granel.studies.design_report import design_study
 
     spec, base = load_design(write_design(tmp_path, trials=8, seed=3, extra=SCREEN))
-    res = design_study(spec, base, tmp_path / "out", workers=1)
+    res = design_study(spec, base, tmp_path / "out", options=DesignRunOptions(workers=1))
     study = res["study"]
     confirmed = study.user_attrs["confirmed"]
     ranked = screened_ranking(spec, study)
@@ -70,5 +71,5 @@ def test_the_best_are_confirmed_at_the_design_s_accuracy(tmp_path):
     for t in ranked[:3]:
         assert f"| {t.number} |" in report
     # a rerun of the finished study confirms nothing again
-    again = run_design(spec, base, tmp_path / "out", workers=1)
+    again = run_design(spec, base, tmp_path / "out", options=DesignRunOptions(workers=1))
     assert again["study"].user_attrs["confirmed"] == confirmed

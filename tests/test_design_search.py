@@ -180,7 +180,8 @@ def test_which_designs_refine():
     samplers (tpe stays TPE alone)."""
     import optuna
 
-    from granel.studies.design import DesignSpec, make_sampler
+    from granel.studies.design import DesignSpec
+    from granel.studies.design_search import make_sampler
     from granel.studies.refine import RefiningSampler
 
     base = {"base": "x.toml", "mode": "run", "pair": ["C:1", "C:8"],
@@ -217,7 +218,8 @@ def ask_and_tell(spec, metrics, workers: int) -> Study:
     through `ask_trial` and `tell`; in memory (the journal's writes cost more than the trials)."""
     import optuna
 
-    from granel.studies.design import ask_trial, tell
+    from granel.studies.design_search import ask_trial
+    from granel.studies.design_trials import tell
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(directions=spec.directions)
@@ -319,12 +321,12 @@ def test_the_searches_land_on_the_measured_cutoff(tmp_path, name, workers):
     1 % of the exact answer for seeds 1-3, on one worker and on two; every trial runs. The
     measure's own error (about 1e-6 here) is far below it. docs/design.md tabulates the errors
     against TPE alone."""
-    from granel.studies.design import run_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     problem = PROBLEMS[name]
     for seed in SEEDS:
         spec, base = load(problem, tmp_path / f"s{seed}", seed)
-        res = run_design(spec, base, tmp_path / f"out{seed}", workers=workers)
+        res = run_design(spec, base, tmp_path / f"out{seed}", options=DesignRunOptions(workers=workers))
         assert (res["trials"]["status"].values == "ok").all()
         assert abs(problem.error(res["best"][0].params)) < LANDS, (seed, res["best"][0].params)
 
@@ -333,11 +335,11 @@ def test_the_searches_land_on_the_measured_cutoff(tmp_path, name, workers):
 def test_one_worker_with_a_seed_repeats_a_measured_study(tmp_path):
     """On granel's runs too: one worker and a seed, run twice, give the same trials (values and
     objective), refinement included (20 trials: the last 14 refine)."""
-    from granel.studies.design import run_design
+    from granel.studies.design_search import DesignRunOptions, run_design
 
     def trials(k):
         spec, base = load(PROBLEMS["preload"], tmp_path / f"s{k}", 2, trials=20)
-        ds = run_design(spec, base, tmp_path / f"out{k}", workers=1)["trials"]
+        ds = run_design(spec, base, tmp_path / f"out{k}", options=DesignRunOptions(workers=1))["trials"]
         return list(ds[f"var_{PRELOAD}"].values), list(ds["objective_cutoff_Hz_misfit"].values)
 
     assert trials(0) == trials(1)

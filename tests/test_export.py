@@ -19,6 +19,7 @@ from granel.cli import app
 from granel.viz.export import EXTXYZ_PROPERTIES, ExportError, elastic_constants, parse_formats, solid_stress
 from granel.analysis.result_model import result_solid, result_system
 from granel.io.results import read_netcdf
+from granel.solid.base import Material, Slab
 from granel.solid.beam import build_beam
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate, plane_stress_forms
 
@@ -206,7 +207,7 @@ def test_plate_stress_patch_test():
     von Mises stress; the strain energy of the plate's own form is 1/2 sigma . eps per volume."""
     layers = [LayerSpec("A", "left", 0.05, 1e-3), LayerSpec("B", "right", 0.04, 5e-4)]
     h = 1e-3
-    m = assemble_plate(0.0, 0.0, 0.01, 0.1, h, E_STEEL, NU_STEEL, RHO_STEEL, layers, PlateMesh(4, 2.0, 5e-3))
+    m = assemble_plate(Slab(0.0, 0.0, 0.01, 0.1, h), Material(E_STEEL, RHO_STEEL, NU_STEEL), layers, PlateMesh(4, 2.0, 5e-3))
     assert m.info["rigid_layers"]
     # the cells under a layer: three of their nodes on the layer's edge segment
     X, Y = m.nodes.T
@@ -235,7 +236,7 @@ def test_beam_bending_stress_pure_bending():
     """w = a y^2 (rotations 2 a y) on every node: the outer-fibre stress E (h/2) |2a| in every
     element, h the section depth (the beam's width); a rigid motion w = b + c y: no stress."""
     W, L, H = 0.01, 0.1, 0.001
-    beam = build_beam(0.0, 0.02, W, L, H, E_STEEL, RHO_STEEL, [("c", "left", 0.07)], 40)
+    beam = build_beam(Slab(0.0, 0.02, W, L, H), Material(E_STEEL, RHO_STEEL, 0.3), [("c", "left", 0.07)], 40)
     y = beam.nodes[:, 1]
     for a in (0.37, -2.5):
         x = np.zeros(beam.T.shape[0])

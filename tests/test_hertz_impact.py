@@ -196,11 +196,12 @@ def test_new_contacts_are_detected():
 
 
 def test_overlap_formulas_of_the_input_checks_match_the_contact_law():
-    """The load checks' overlaps (materials.static_overlap, impact_overlap) against the one
+    """The load checks' overlaps (contact.hertz_overlap, impact_overlap) against the one
     contact law: the force at the static overlap is F, and the Hertz energy at the impact
     overlap is the kinetic energy 1/2 m v^2 (the law's own potential, 2/5 A delta^(5/2))."""
     from granel.granular.contact import hertz_potential, hertz_tsuji_normal
-    from granel.granular.materials import hertz_coefficient, impact_overlap, static_overlap
+    from granel.granular.contact import hertz_overlap as static_overlap, impact_overlap
+    from granel.granular.materials import hertz_coefficient
 
     A = hertz_coefficient(2.2e11, 5e-3)
     # a power with a rounded exponent (2/3, 2/5) is off by its rounding, eps/2 of the exponent,

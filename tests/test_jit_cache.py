@@ -12,6 +12,14 @@ import pytest
 
 from granel.guard import jit
 
+
+@pytest.fixture(autouse=True)
+def _default_numba_cache(monkeypatch):
+    """These tests compile into the default cache folder beside their package (NUMBA_CACHE_DIR
+    unset): in this process, where they look for the files, as in the children they start."""
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+
+
 CALLER = """\
 {import_njit}
 from helper import g
@@ -94,3 +102,43 @@ def test_granel_kernels_cache_under_their_key():
     key = jit.sources_key(jit.KERNEL_SOURCES)
     for fn in (kernels.rhs, exact.accept):
         assert f"{jit.PREFIX}{key}" in str(fn._cache._cache_path)
+
+
+def test_an_unusable_numba_cache_dir_is_replaced_with_a_note(tmp_path, monkeypatch, capsys):
+    """NUMBA_CACHE_DIR a file, or a folder below a file: granel's own folder instead, said in one
+    note naming the variable; with no folder to write at all, none (`cached_njit` then compiles
+    without a cache)."""
+    src, plain, home = tmp_path / "kern.py", tmp_path / "plain.txt", tmp_path / "pkg"
+    src.write_text("x = 1\n")
+    plain.write_text("a file, not a folder\n")
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(plain))  # no ~/.cache to fall back to
+    for bad in (plain, plain / "numba"):
+        monkeypatch.setenv("NUMBA_CACHE_DIR", str(bad))
+        monkeypatch.setattr(jit, "_ANNOUNCED", set())
+        assert jit.cache_folder((src,), home) == home / "__pycache__" / f"{jit.PREFIX}{jit.sources_key((src,))}"
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("note: compiled-kernel cache: NUMBA_CACHE_DIR=") \
+            and str(home / "__pycache__") in err, err
+    assert jit.cache_folder((src,), plain) is None  # plain/__pycache__ is below a file too
+    assert "compiles its kernels in every process" in capsys.readouterr().err
+
+
+def test_no_writable_cache_compiles_without_one(tmp_path):
+    """No folder granel can write (NUMBA_CACHE_DIR and HOME files, the package's folder below a
+    file): the kernel compiles and runs, and no cache file is written, not even in numba's own
+    folder beside the source (keyed by that file alone, it would keep stale kernels)."""
+    plain = tmp_path / "plain.txt"
+    plain.write_text("a file, not a folder\n")
+    (tmp_path / "kern.py").write_text("from pathlib import Path\nfrom granel.guard.jit import cached_njit\n"
+                                      "here = Path(__file__).parent\n"
+                                      "njit = cached_njit((here / 'kern.py',), home=here / 'plain.txt')\n\n\n"
+                                      "@njit(cache=True)\ndef f():\n    return 7\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(plain), "HOME": str(plain)}
+    out = subprocess.run([sys.executable, "-c", "import kern; print(kern.f())"], cwd=tmp_path, env=env,
+                         capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.split()[-1] == "7", out.stderr
+    notes = [line for line in out.stderr.splitlines() if line.strip()]
+    assert len(notes) == 1 and "NUMBA_CACHE_DIR" in notes[0] and "every process" in notes[0], out.stderr
+    written = [p for p in tmp_path.rglob("*") if p.suffix in (".nbi", ".nbc")]
+    assert not written, written

@@ -6,6 +6,7 @@ functions included. The package root holds only the command line and the run."""
 from __future__ import annotations
 
 import ast
+import re
 import warnings
 from pathlib import Path
 
@@ -37,8 +38,17 @@ def _may_import(unit: str, package: Path = PACKAGE) -> set[str] | None:
     return {u.strip() for u in text.split(",")}
 
 
+# the layers from the bottom up: a unit may import only units below it (its "May import:" line
+# chooses among them)
+ORDER = ["guard", "io", "solid", "granular", "coupling", "analysis", "problem", "scenario", "run", "viz", "studies",
+         "cli"]
+# a module named in a string ("granel.coupling.exact.loop:compile_plan", loaded by importlib)
+BY_NAME = re.compile(r"^granel(\.[A-Za-z_]\w*)+(:\w+)?$")
+
+
 def _imports(path: Path, package: Path = PACKAGE) -> list[tuple[int, str]]:
-    """(line, module) of every import of granel's code in a file, relative ones resolved."""
+    """(line, module) of every import of granel's code in a file, relative ones resolved, and of
+    every module a string names to be loaded by name (importlib)."""
     rel = path.relative_to(package.parent).with_suffix("")
     parts = list(rel.parts)
     is_pkg = parts[-1] == "__init__"
@@ -59,6 +69,8 @@ def _imports(path: Path, package: Path = PACKAGE) -> list[tuple[int, str]]:
                 found.append((node.lineno, target))
         elif isinstance(node, ast.Import):
             found += [(node.lineno, a.name) for a in node.names if a.name.startswith("granel.")]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and BY_NAME.match(node.value):
+            found.append((node.lineno, node.value.split(":")[0]))
     return found
 
 
@@ -134,3 +146,93 @@ def test_a_moved_module_imports_under_its_old_name_with_a_warning():
 
     assert run_sweep is new
     assert any("granel.sweep moved to granel.studies.sweep" in str(w.message) for w in caught)
+
+
+def test_the_layers_are_ordered():
+    """Every unit is in ORDER, and its "May import:" line names only units below it: a folder
+    cannot allow a higher one."""
+    units = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists()} | {"run", "problem", "cli"}
+    assert units == set(ORDER), sorted(units ^ set(ORDER))
+    wrong = []
+    for unit in ORDER:
+        allowed = _may_import(unit)
+        below = set(ORDER[: ORDER.index(unit)])
+        if allowed is None:
+            assert unit == ORDER[-1], f"{unit} may import everything, but it is not the top"
+            continue
+        wrong += [f"{unit} may import {u}, which is not below it" for u in sorted(allowed - below)]
+    assert not wrong, wrong
+
+
+def test_a_module_loaded_by_name_is_an_import(tmp_path):
+    """On a small package: a lower unit naming a higher module in a string is caught."""
+    pkg = tmp_path / "granel"
+    (pkg / "guard").mkdir(parents=True)
+    (pkg / "coupling").mkdir()
+    (pkg / "__init__.py").write_text('"""root"""\n')
+    (pkg / "guard" / "__init__.py").write_text('"""guard\nMay import: nothing."""\n')
+    (pkg / "coupling" / "__init__.py").write_text('"""coupling\nMay import: guard."""\n')
+    (pkg / "guard" / "ahead.py").write_text('PLAN = "granel.coupling.loop:compile_plan"\n')
+    (pkg / "coupling" / "loop.py").write_text('ENTRY = "granel.guard.ahead"\n')
+    found = violations(pkg)
+    assert len(found) == 1 and "granel/guard/ahead.py:1 imports granel.coupling.loop" in found[0], found
+
+
+# what reads a scenario's text: its TOML parser, the scenario's own readers and validators
+PARSERS = {("tomllib", "loads"), ("tomllib", "load"), ("S", "load_raw"), ("S", "validate"), ("Scenario", "model_validate"),
+           ("S", "apply_overrides")}
+PARSING_UNITS = {"scenario", "run"}
+
+
+def scenario_parses(package: Path = PACKAGE) -> list[str]:
+    """Every call outside the scenario layer and the run that parses a scenario (`PARSERS`), and
+    every reading of a result's stored scenario text (`attrs["scenario"]` parsed or indexed)."""
+    found = []
+    for path in sorted(p for p in package.rglob("*.py") if "__pycache__" not in p.parts):
+        unit = _unit(_module(path, package))
+        if unit in PARSING_UNITS or path.name == "reading.py":  # guard.reading: the one reader of users' files
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and isinstance(node.func.value, ast.Name):
+                if (node.func.value.id, node.func.attr) in PARSERS:
+                    found.append(f"{path.relative_to(package.parent)}:{node.lineno} calls "
+                                 f"{node.func.value.id}.{node.func.attr}")
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("load_raw", "validate"):
+                found.append(f"{path.relative_to(package.parent)}:{node.lineno} calls {node.func.id}")
+    return found
+
+
+def test_only_the_scenario_layer_and_the_run_parse_a_scenario():
+    """A result is read through its model record (`analysis.result_model`), never by parsing the
+    scenario text it stores again."""
+    found = scenario_parses()
+    assert not found, "\n".join(found)
+
+
+def test_the_pictures_do_not_import_the_run():
+    assert "run" not in (_may_import("viz") or {"run"})
+    wrong = [v for v in violations() if v.startswith("granel/viz/") and "granel.run" in v]
+    assert not wrong, wrong
+
+
+@pytest.mark.parametrize("solver,sparse", [("paper", None), ("fast", None), ("fast-newmark", None), ("paper", True)],
+                         ids=["paper's algorithm", "exact modal", "modal Newmark", "sparse Newmark"])
+def test_each_solver_is_a_solver(solver, sparse):
+    """Every solver `run.make_solver` gives satisfies `coupling.protocol.Solver`: its attributes,
+    and its methods with the protocol's parameters."""
+    import inspect
+
+    from granel import scenario as S
+    from granel.coupling.protocol import Solver
+    from granel.run import make_solver
+
+    sets = ['solid.kind="beam"', 'simulation.duration="0.01ms"',
+            f'simulation.solver="{solver.split("-")[0]}"'] + (['simulation.integrator="newmark"'] if "newmark" in solver else [])
+    made = make_solver(S.build_problem(S.load("paper", sets)), sparse=sparse)
+    assert isinstance(made, Solver), type(made).__name__
+    for name, member in vars(Solver).items():
+        if callable(member) and not name.startswith("_"):
+            want = list(inspect.signature(member).parameters)[1:]
+            have = list(inspect.signature(getattr(made, name)).parameters)
+            assert have[: len(want)] == want, f"{type(made).__name__}.{name}{tuple(have)}: the protocol's is {tuple(want)}"
+    assert isinstance(made.name, str) and made.name

@@ -13,20 +13,21 @@ import numpy as np
 import pytest
 
 from granel.guard.owners import process_token
-from granel.solid import mode_cache, modal
+from granel.solid import cache_lock, mode_cache, mode_scaling, modal
+from granel.solid.base import Material, Slab
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate
 
 
 @pytest.fixture
 def plate(tmp_path, monkeypatch):
     monkeypatch.setenv("GRANEL_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(mode_cache, "LOCK_POLL_S", 0.02)
+    monkeypatch.setattr(cache_lock, "LOCK_POLL_S", 0.02)
     layers = [LayerSpec("a", "left", 0.05, 0.001), LayerSpec("b", "right", 0.04, 0.001)]
-    return assemble_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, PlateMesh(2, 2.5, 8e-3))
+    return assemble_plate(Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), layers, PlateMesh(2, 2.5, 8e-3))
 
 
 def holder(token: str) -> str:
-    """A lock's text naming the process of `token` as its holder (`mode_cache._lock_text`'s fields)."""
+    """A lock's text naming the process of `token` as its holder (`cache_lock._lock_text`'s fields)."""
     pid = int(token.split("-")[1])
     return json.dumps({"token": token, "host": "here", "pid": pid, "since": time.time(), "what": "test modes"})
 
@@ -42,7 +43,7 @@ def test_a_process_waits_for_the_modes_another_is_computing(plate):
     time.sleep(0.5)
     assert waiter.is_alive() and "modes" not in got  # it waits rather than solve
     modes = modal.modal_analysis(plate)
-    mode_cache._store(plate, stem, mode_cache._scale_free(plate), (float("inf"), None), modes)
+    mode_cache._store(plate, stem, mode_scaling._scale_free(plate), (float("inf"), None), modes)
     lock.unlink()  # the holder is done
     waiter.join(30)
     assert not waiter.is_alive()

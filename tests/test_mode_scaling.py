@@ -7,10 +7,11 @@ import pytest
 import scipy.sparse as sp
 
 from granel import scenario as S
-from granel.solid.base import SolidModel
+from granel.solid.base import Material, Slab, SolidModel
 from granel.solid.beam import build_beam
 from granel.solid.modal import at_dofs, modal_analysis
-from granel.solid.mode_cache import ScaledShapes, all_modes, modes_below
+from granel.solid.mode_cache import all_modes, modes_below
+from granel.solid.mode_scaling import ScaledShapes
 from granel.solid.plate import CachedPlate, LayerSpec, PlateMesh, assemble_plate, build_plate
 
 from test_symmetry import EPS, eigen_bounds
@@ -28,7 +29,7 @@ def cache(tmp_path, monkeypatch):
 
 
 def plate_args(h=H, e=E, rho=RHO, nu=NU, layers=LAYERS, mesh=MESH):
-    return (0.0, 0.0, W, L, h, e, nu, rho, layers, mesh)
+    return (Slab(0.0, 0.0, W, L, h), Material(e, rho, nu), layers, mesh)
 
 
 def mode_files(folder):
@@ -123,7 +124,7 @@ def test_beam_modes_scaled_from_the_cache_equal_a_direct_solve(cache, change):
     aluminium (the two beams' matrices proportional to 3e-14), so the scaled set and the direct
     one differ by the sum of the two solves' errors; both are eigenpairs to round-off."""
     def beam(e=E, rho=RHO, thickness=H, width=W):
-        return build_beam(0.0, 0.0, width, L, thickness, e, rho, [("c", "left", 0.05)], 40)
+        return build_beam(Slab(0.0, 0.0, width, L, thickness), Material(e, rho, 0.3), [("c", "left", 0.05)], 40)
 
     assert all_modes(beam()).origin == "computed"
     target = beam(**change)

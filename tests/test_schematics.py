@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from granel import scenario as S
+from granel.viz import drawing as D
+from granel.viz import model_geometry as G
 from granel.viz import schematics as X
 from granel.scenario import build_solid
 
@@ -28,13 +30,13 @@ def paper():
 @pytest.fixture(scope="module")
 def plate(paper):
     sc, system = paper
-    return build_solid(X.with_solid_kind(sc, "plate"), system)
+    return build_solid(G.with_solid_kind(sc, "plate"), system)
 
 
 @pytest.fixture(scope="module")
 def beam(paper):
     sc, system = paper
-    return build_solid(X.with_solid_kind(sc, "beam"), system)
+    return build_solid(G.with_solid_kind(sc, "beam"), system)
 
 
 @pytest.fixture(scope="module")
@@ -83,9 +85,9 @@ def test_files_written(files):
 
 def test_fig1_draws_all_six_walls_where_the_paper_has_them(fig1, paper):
     _, system = paper
-    walls = X.tagged(fig1, "a", "wall")
-    hatches = X.tagged(fig1, "a", "wall-hatch")
-    labels = X.tagged(fig1, "a", "wall-label")
+    walls = D.tagged(fig1, "a", "wall")
+    hatches = D.tagged(fig1, "a", "wall-hatch")
+    labels = D.tagged(fig1, "a", "wall-label")
     assert len(walls) == len(system.walls) == 6
     assert set(walls) == set(hatches) == set(labels) == {w.name for w in system.walls}
     assert all(labels[name].get_text() == name for name in labels)
@@ -105,7 +107,7 @@ def test_fig1_draws_all_six_walls_where_the_paper_has_them(fig1, paper):
 
 def test_fig1_labels_every_granule_at_its_centre(fig1, paper):
     _, system = paper
-    labels = X.tagged(fig1, "a", "granule-label")
+    labels = D.tagged(fig1, "a", "granule-label")
     assert {t.get_text() for t in labels.values()} == {str(k) for k in range(1, 15)} | set("ABCDEFGHIJKLMN")
     assert labels["LSGM:3"].get_position() == pytest.approx((-(1 + 2 * SQ3) * R_L, 50.0))
     assert labels["SSGM:C"].get_position() == pytest.approx((10.0 + (1 + 2 * SQ3) * R_S, 50.0))
@@ -114,20 +116,20 @@ def test_fig1_labels_every_granule_at_its_centre(fig1, paper):
 
 
 def test_fig1_solid_contacts_clamps_and_free_edges(fig1):
-    contacts = X.tagged(fig1, "a", "solid-contact")
+    contacts = D.tagged(fig1, "a", "solid-contact")
     xy = {name: tuple(line.get_xydata()[0]) for name, line in contacts.items()}
     left = sorted(y for x, y in xy.values() if abs(x) < 1e-9)
     right = sorted(y for x, y in xy.values() if abs(x - 10.0) < 1e-9)
     np.testing.assert_allclose(left, [10, 30, 50, 70, 90])
     np.testing.assert_allclose(right, [30, 40, 50, 60, 70])
-    clamps = X.tagged(fig1, "a", "clamp")
+    clamps = D.tagged(fig1, "a", "clamp")
     np.testing.assert_allclose(clamps["bottom"].get_xydata(), [(0, 0), (10, 0)], atol=1e-9)
     np.testing.assert_allclose(clamps["top"].get_xydata(), [(0, 100), (10, 100)], atol=1e-9)
-    assert set(X.tagged(fig1, "a", "free-edge")) == {"left", "right"}
+    assert set(D.tagged(fig1, "a", "free-edge")) == {"left", "right"}
 
 
 def test_fig1_shock_arrows_at_both_paper_sites(fig1):
-    shocks = X.tagged(fig1, "a", "shock")
+    shocks = D.tagged(fig1, "a", "shock")
     assert set(shocks) == {"LSGM:3", "SSGM:C"}
     centres = {"LSGM:3": (np.array([-(1 + 2 * SQ3) * R_L, 50.0]), R_L, (1.0, 0.0)),
                "SSGM:C": (np.array([10.0 + (1 + 2 * SQ3) * R_S, 50.0]), R_S, (-1.0, 0.0))}
@@ -136,12 +138,12 @@ def test_fig1_shock_arrows_at_both_paper_sites(fig1):
         np.testing.assert_allclose(_unit(head - tail), direction, atol=1e-12)
         # drawn inside the disc, so it never crosses the outer wall it touches
         assert np.hypot(*(tail - c)) < R and np.hypot(*(head - c)) < R
-    assert {t.get_text() for t in X.tagged(fig1, "a", "shock-label").values()} == {"F(t)"}
+    assert {t.get_text() for t in D.tagged(fig1, "a", "shock-label").values()} == {"F(t)"}
 
 
 def test_fig1_closeup_normal_and_tangent_vectors(fig1):
-    normals = X.tagged(fig1, "b", "normal")
-    tangents = X.tagged(fig1, "b", "tangent")
+    normals = D.tagged(fig1, "b", "normal")
+    tangents = D.tagged(fig1, "b", "tangent")
     assert set(normals) == set(tangents) == {"LSGM:12", "LSGM:12-LSGM:8"}
     # granule-solid: n_ik toward the solid (+x), t_ik = k x n_ik = +y
     tail, head = _arrow(normals["LSGM:12"])
@@ -156,7 +158,7 @@ def test_fig1_closeup_normal_and_tangent_vectors(fig1):
     tail, head = _arrow(tangents["LSGM:12-LSGM:8"])
     np.testing.assert_allclose(_unit(head - tail), (-0.5, -SQ3 / 2), atol=1e-12)
     # the inset's rigid layer: R/10 of granule 12 = 1 mm
-    tail, head = _arrow(X.tagged(fig1, "b", "layer-span")["LSGM:12"])
+    tail, head = _arrow(D.tagged(fig1, "b", "layer-span")["LSGM:12"])
     assert abs(abs(head[1] - tail[1]) - 1.0) < 1e-9
 
 
@@ -164,9 +166,9 @@ def test_fig1_beam_scenario_and_missing_solid(paper):
     sc_beam = S.load("paper", ['solid.kind="beam"'])
     fig = X.figure1(sc_beam)
     try:
-        assert set(X.tagged(fig, "a", "solid")) == {"beam"}
-        assert len(X.tagged(fig, "a", "wall")) == 6
-        assert set(X.tagged(fig, "a", "shock")) == {"LSGM:3", "SSGM:C"}
+        assert set(D.tagged(fig, "a", "solid")) == {"beam"}
+        assert len(D.tagged(fig, "a", "wall")) == 6
+        assert set(D.tagged(fig, "a", "shock")) == {"LSGM:3", "SSGM:C"}
     finally:
         plt.close(fig)
     with pytest.raises(ValueError, match="no solid"):
@@ -177,10 +179,10 @@ def test_fig1_beam_scenario_and_missing_solid(paper):
 
 def test_swapped_shock_mirrors_the_excited_granule(paper):
     sc, system = paper
-    label, exc = X.swapped_shock(sc, system)
+    label, exc = G.swapped_shock(sc, system)
     assert label == "SSGM:C" and exc.direction == (-1.0, 0.0)
     sc_c = S.load("paper", ['excitations.0.granule="SSGM:C"'])
-    label, exc = X.swapped_shock(sc_c, system)
+    label, exc = G.swapped_shock(sc_c, system)
     assert label == "LSGM:3" and exc.direction == (1.0, 0.0)
 
 
@@ -189,7 +191,7 @@ def test_swapped_shock_mirrors_the_excited_granule(paper):
 
 def test_fig2_plate_panel_draws_every_element(fig2, paper, plate):
     sc, _ = paper
-    mesh = X.tagged(fig2, "b", "elements")[""]
+    mesh = D.tagged(fig2, "b", "elements")[""]
     # independent count: nx across (scenario) times ny along (Q8 edge: 2 ny + 1 nodes)
     on_edge = np.sum(np.abs(plate.nodes[:, 0]) < 1e-12)
     ny = (on_edge - 1) // 2
@@ -201,30 +203,30 @@ def test_fig2_plate_panel_draws_every_element(fig2, paper, plate):
 @pytest.mark.parametrize("panel, name, edge, R", [("c", "LSGM:12", 0.0, 0.010), ("d", "SSGM:L", 0.010, 0.005)])
 def test_fig2_rigid_layer_closeups(fig2, plate, panel, name, edge, R):
     expected = R / 10  # the paper's rigid layer length
-    tail, head = _arrow(X.tagged(fig2, panel, "layer-span")[name])
+    tail, head = _arrow(D.tagged(fig2, panel, "layer-span")[name])
     assert abs(abs(head[1] - tail[1]) / 1e3 - expected) < 1e-12
-    assert f"{expected * 1e3:.2f} mm" in X.tagged(fig2, panel, "layer-label")[name].get_text()
+    assert f"{expected * 1e3:.2f} mm" in D.tagged(fig2, panel, "layer-label")[name].get_text()
     # highlighted nodes = the plate nodes on the edge within the layer (5: two Q8 elements)
     ours = np.flatnonzero((np.abs(plate.nodes[:, 0] - edge) < 1e-12)
                           & (np.abs(plate.nodes[:, 1] - 0.05) <= expected / 2 + 1e-12))
     assert len(ours) == 5
-    drawn = X.tagged(fig2, panel, "layer-nodes")[name].get_xydata() / 1e3
+    drawn = D.tagged(fig2, panel, "layer-nodes")[name].get_xydata() / 1e3
     np.testing.assert_allclose(sorted(map(tuple, drawn)), sorted(map(tuple, plate.nodes[ours])), atol=1e-15)
-    assert len(X.tagged(fig2, panel, "layer-elements")[name].get_paths()) == 2
-    layer = X.rigid_layer(plate, name)
+    assert len(D.tagged(fig2, panel, "layer-elements")[name].get_paths()) == 2
+    layer = G.rigid_layer(plate, name)
     assert abs(layer.length - expected) < 1e-12 and abs(layer.centre - 0.05) < 1e-12
 
 
 def test_rigid_layers_are_a_tenth_of_each_radius(paper, plate):
     _, system = paper
     for c in system.solid_contacts:
-        layer = X.rigid_layer(plate, c.name)
+        layer = G.rigid_layer(plate, c.name)
         assert len(layer.nodes) == 5
         assert abs(layer.length - system.radius[c.granule] / 10) < 1e-12
 
 
 def test_fig2_beam_marks_contacts_at_nodes(fig2, beam):
-    marks = X.tagged(fig2, "a", "beam-contact")
+    marks = D.tagged(fig2, "a", "beam-contact")
     assert len(marks) == len(beam.contacts) == 10
     node_y = beam.nodes[:, 1] * 1e3
     heights = []
@@ -233,7 +235,7 @@ def test_fig2_beam_marks_contacts_at_nodes(fig2, beam):
         assert np.min(np.abs(node_y - y)) < 1e-9
         heights.append(y)
     np.testing.assert_allclose(sorted(heights), sorted([10, 30, 50, 70, 90, 30, 40, 50, 60, 70]), atol=1e-9)
-    assert len(X.tagged(fig2, "a", "beam-nodes")[""].get_xydata()) == 41
+    assert len(D.tagged(fig2, "a", "beam-nodes")[""].get_xydata()) == 41
     title = fig2.axes[0].get_title()
     assert "40 Hermite elements" in title and "78 DOFs" in title
 
@@ -241,8 +243,8 @@ def test_fig2_beam_marks_contacts_at_nodes(fig2, beam):
 def test_fig2_from_a_beam_scenario_still_draws_the_plate(plate):
     fig = X.figure2(S.load("paper", ['solid.kind="beam"']))
     try:
-        assert len(X.tagged(fig, "b", "elements")[""].get_paths()) == plate.nelements
-        assert set(X.tagged(fig, "c", "layer-span")) == {"LSGM:12"}
-        assert set(X.tagged(fig, "d", "layer-span")) == {"SSGM:L"}
+        assert len(D.tagged(fig, "b", "elements")[""].get_paths()) == plate.nelements
+        assert set(D.tagged(fig, "c", "layer-span")) == {"LSGM:12"}
+        assert set(D.tagged(fig, "d", "layer-span")) == {"SSGM:L"}
     finally:
         plt.close(fig)

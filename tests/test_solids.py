@@ -10,6 +10,7 @@ from scipy.optimize import brentq
 from scipy.sparse.linalg import eigsh, spsolve
 
 from granel import scenario as S
+from granel.solid.base import Material, Slab
 from granel.solid.beam import build_beam, clamped_clamped_periods
 from granel.scenario import build_solid
 from granel.solid.modal import classify_modes, modal_analysis
@@ -82,7 +83,7 @@ def test_beam_periods_match_euler_bernoulli():
     exact = clamped_clamped_periods(E, RHO, W, H, L, 5)
     err = []
     for n in (20, 40):
-        beam = build_beam(0, 0, W, L, H, E, RHO, [("c", "left", 0.05)], n)
+        beam = build_beam(Slab(0, 0, W, L, H), Material(E, RHO, 0.3), [("c", "left", 0.05)], n)
         md = modal_analysis(beam)
         err.append(np.abs(md.periods[:5] / exact - 1))
     assert beam.ndof == 78
@@ -97,7 +98,7 @@ def test_beam_static_loads_match_closed_forms():
     I = H * W**3 / 12
     P = 10.0
     # cantilever (clamped at y = 0, free tip): tip deflection P L^3 / (3 E I)
-    cant = build_beam(0, 0, W, L, H, E, RHO, [("tip", "left", L)], 40, clamped=(True, False))
+    cant = build_beam(Slab(0, 0, W, L, H), Material(E, RHO, 0.3), [("tip", "left", L)], 40, clamped=(True, False))
     F = np.zeros(cant.ndof)
     F[cant.contacts[0].dof_x] = P
     q = spsolve(cant.K.tocsc(), F)
@@ -105,7 +106,7 @@ def test_beam_static_loads_match_closed_forms():
     # eps kappa (measured 6e-11 and 2e-11 (Prescott) against 3e-9 here, 6e-13 and 1e-12 against 5e-11 below)
     assert q[cant.contacts[0].dof_x] == pytest.approx(P * L**3 / (3 * E * I), rel=EPS * scaled_condition(cant.K))
     # clamped-clamped, central load: P L^3 / (192 E I)
-    cc = build_beam(0, 0, W, L, H, E, RHO, [("mid", "left", L / 2)], 40)
+    cc = build_beam(Slab(0, 0, W, L, H), Material(E, RHO, 0.3), [("mid", "left", L / 2)], 40)
     F = np.zeros(cc.ndof)
     F[cc.contacts[0].dof_x] = P
     q = spsolve(cc.K.tocsc(), F)
@@ -114,7 +115,7 @@ def test_beam_static_loads_match_closed_forms():
 
 def test_beam_contact_off_node_is_an_error():
     with pytest.raises(ValueError, match="not on a node"):
-        build_beam(0, 0, W, L, H, E, RHO, [("c", "left", 0.0512)], 40)
+        build_beam(Slab(0, 0, W, L, H), Material(E, RHO, 0.3), [("c", "left", 0.0512)], 40)
 
 
 # ---------------------------------------------------------------- plate
@@ -165,7 +166,7 @@ def test_plate_mesh_converges():
     meshes = [(4, 2.0, 5e-3), (6, 1.6, 2e-3), (12, 1.4, 1.5e-3), (16, 1.3, 1e-3)]
     table = []
     for nx, g, ms in meshes:
-        m = build_plate(0, 0, W, L, H, E, NU, RHO, PAPER_LAYERS, PlateMesh(nx, g, ms))
+        m = build_plate(Slab(0, 0, W, L, H), Material(E, RHO, NU), PAPER_LAYERS, PlateMesh(nx, g, ms))
         table.append(modal_analysis(m, 8).periods[[0, 3, 6]])
     table = np.array(table)
     assert np.all(np.diff(table, axis=0) > 0)
@@ -175,7 +176,7 @@ def test_plate_mesh_converges():
 def test_q8_patch_test():
     """A linear displacement imposed on the boundary of the (distorted) graded mesh is
     reproduced exactly inside: constant strain, exact for Q8."""
-    m = build_plate(0, 0, W, L, H, E, NU, RHO, PAPER_LAYERS, PlateMesh(4, 2.0, 5e-3, rigid_layers=False), clamped=(False, False))
+    m = build_plate(Slab(0, 0, W, L, H), Material(E, RHO, NU), PAPER_LAYERS, PlateMesh(4, 2.0, 5e-3, rigid_layers=False), clamped=(False, False))
     basis = m.basis
     K = m.K  # no layers, nothing clamped: the full stiffness
     loc = basis.doflocs
@@ -248,7 +249,7 @@ def test_element_energies_sum_to_the_global_ones(paper_plate):
 
 
 def test_newmark_conserves_energy_in_free_vibration():
-    m = build_plate(0, 0, W, L, H, E, NU, RHO, PAPER_LAYERS, PlateMesh(4, 2.0, 5e-3))
+    m = build_plate(Slab(0, 0, W, L, H), Material(E, RHO, NU), PAPER_LAYERS, PlateMesh(4, 2.0, 5e-3))
     nm = Newmark(m.M, m.K)
     rng = np.random.default_rng(11)
     s = nm.initial(v0=rng.normal(size=m.ndof))
@@ -319,7 +320,7 @@ def test_the_plate_cache_gives_the_assembled_plate(tmp_path, monkeypatch):
 
     monkeypatch.setenv("GRANEL_CACHE", str(tmp_path))
     layers = [LayerSpec("A", "left", 0.05, 1e-3), LayerSpec("B", "right", 0.04, 5e-4)]
-    args = (0.0, 0.0, 0.01, 0.1, 1e-3, 200e9, 0.3, 7850.0, layers, PlateMesh(6, 1.6, 2e-3, 1.5))
+    args = (Slab(0.0, 0.0, 0.01, 0.1, 1e-3), Material(200e9, 7850.0, 0.3), layers, PlateMesh(6, 1.6, 2e-3, 1.5))
     fresh = build_plate(*args)
     cached = build_plate(*args)
     assert isinstance(cached, plate.CachedPlate) and not isinstance(fresh, plate.CachedPlate)
@@ -340,7 +341,7 @@ def test_the_cache_is_pruned_oldest_first_and_only_granel_files(tmp_path, monkey
     first, a file named in `keep` never, and a foreign file in the folder is never touched."""
     import os
 
-    from granel.solid.mode_cache import cache_limit, prune_cache
+    from granel.solid.cache_files import cache_limit, prune_cache
 
     monkeypatch.setenv("GRANEL_CACHE", str(tmp_path))
     names = ["modes-plate-1-a.shapes.npy", "modes-plate-1-a.omega.npy", "plate-b.npz", "modes-below-beam-2-c.shapes.npy",

@@ -143,7 +143,7 @@ def test_map_command(swept, tmp_path):
     res = CliRunner().invoke(app, ["map", str(tmp / "out" / "summary.nc"), "-o", str(tmp_path / "m.png")])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "m.png").stat().st_size > 10_000
-    res = CliRunner().invoke(app, ["map", str(tmp / "out" / "summary.nc"), "--metric", "nope"])
+    res = CliRunner().invoke(app, ["map", str(tmp / "out" / "summary.nc"), "-o", str(tmp_path / "m2.png"), "--metric", "nope"])
     assert res.exit_code == 2 and "unknown metric" in res.output
 
 

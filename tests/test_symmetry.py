@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
+from granel.solid.base import Material, Slab
 from granel.solid.beam import build_beam
 from granel.solid.plate import LayerSpec, PlateMesh, assemble_plate
 from granel.solid.symmetry import mirror_operator, split_eigh, symmetric_bases
@@ -28,7 +29,7 @@ def eigen_bounds(K, M, phi, w2):
 
 
 def plate(layers):
-    return assemble_plate(0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, layers, MESH)
+    return assemble_plate(Slab(0.0, 0.0, 0.01, 0.1, 0.001), Material(200e9, 7850.0, 0.3), layers, MESH)
 
 
 SYMMETRIC = [LayerSpec("a", "left", 0.05, 0.001), LayerSpec("b", "left", 0.03, 0.001), LayerSpec("c", "left", 0.07, 0.001),
@@ -99,7 +100,7 @@ def test_split_modes_equal_the_whole_solve():
 
 def test_no_split_without_symmetry():
     assert mirror_operator(plate(SYMMETRIC[:-1])) is None  # one layer without its image
-    assert mirror_operator(build_beam(0, 0, 0.01, 0.1, 0.001, 200e9, 7850, [("c", "left", 0.05)], 20)) is None
+    assert mirror_operator(build_beam(Slab(0, 0, 0.01, 0.1, 0.001), Material(200e9, 7850, 0.3), [("c", "left", 0.05)], 20)) is None
 
 
 def test_modal_analysis_uses_the_split():

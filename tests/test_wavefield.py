@@ -21,7 +21,7 @@ runner = CliRunner()
 
 
 def harmonic(ends, k, s):
-    """The basis functions as the module docstring states them, written here."""
+    """The basis functions as docs/wavefield.md states them, written here."""
     if ends == (False, False):
         return np.cos(k * s)
     if ends == (False, True):
@@ -114,8 +114,8 @@ def test_plate_lines_carry_the_q8_field_exactly():
     from granel.solid.plate import PlateMesh
     from granel.solid.recipe import SolidRecipe, build_solid_model
 
-    r = SolidRecipe("plate", (), 0.0, 0.0, 0.01, 0.1, 0.001, 200e9, 0.3, 7850.0, PlateMesh(nx=4, max_size=5e-3),
-                    clamped=(False, False))
+    r = SolidRecipe("plate", (), x0=0.0, y0=0.0, width=0.01, length=0.1, thickness=0.001, E=200e9, nu=0.3, rho=7850.0,
+                    mesh=PlateMesh(nx=4, max_size=5e-3), clamped=(False, False))
     model = build_solid_model(r)
     lines = W.node_lines(model)
     assert len(lines.x) == 5 and lines.basis.ends == "free-free"

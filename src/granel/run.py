@@ -4,7 +4,7 @@ This is the one place that knows both the scenario and the solvers: below it, so
 built objects (`problem.Problem`); above it, figures and analysis read result Datasets and the
 model record each carries (`io.model`). Results of an earlier granel, without a record, get one
 here from their stored scenario (`legacy_model_record`).
-May import: scenario, problem, coupling, solid, granular, io, guard."""
+May import: scenario, problem, analysis, coupling, solid, granular, io, guard."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from .coupling.driver import drive
 from .problem import Problem
 from .io.results import write_spec_netcdf
 from .io.run_result import base_attrs, trajectory_spec
+from .analysis.balance import relative_balance_error
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
@@ -46,14 +47,12 @@ def make_solver(problem: Problem, sparse: bool | None = None):
             modes = modes_below(solid, float(settings.mode_cutoff))
         elif solid.ndof:
             modes = all_modes(solid)
-        return ExactSolver(problem.system, problem.state, solid, settings, problem.schedule, modes, problem.scales,
-                           problem.kinks, problem.solid_force0)
+        return ExactSolver(problem, modes)
     if large:
         from .coupling.sparse import SparseSolver
 
-        return SparseSolver(problem.system, problem.state, solid, settings, problem.schedule.per, problem.solid_force0)
-    return ModalSolver(problem.system, problem.state, solid, settings, problem.schedule.per,
-                       all_modes(solid) if solid.ndof else None, problem.solid_force0)
+        return SparseSolver(problem)
+    return ModalSolver(problem, all_modes(solid) if solid.ndof else None)
 
 
 def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, sparse: bool | None = None,
@@ -68,7 +67,8 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     setup_s = time.perf_counter() - start
     # what a checkpoint resumes: the scenario, the method and the contents of the files it reads
     fp = fingerprint(problem.source + problem.settings.method + (encode(problem.inputs) if problem.inputs else ""))
-    traj = drive(solver, problem.schedule, progress, checkpoint, resume, fp, problem.guards, max_wall)
+    traj = drive(solver, problem.schedule, progress=progress, checkpoint=checkpoint, resume=resume, fingerprint=fp,
+                 guards=problem.guards, max_wall=max_wall)
     solid = problem.solid
     steps = traj.step_series("h")
     its = traj.step_series("iterations").astype(float)
@@ -137,11 +137,55 @@ def run_to_file(sc: S.Scenario, output, progress=None, checkpoint=None, resume=N
     return summary
 
 
-def built_models(sc: S.Scenario):
-    """(GranularSystem, SolidModel) of a scenario, for drawings of the scenario (not of a result:
-    a result carries its model, `io.model`)."""
-    problem = S.build_problem(sc)
-    return problem.system, problem.solid
+def plan_run_outputs(output: Path, sc: S.Scenario, source: str, resume: Path | None) -> Path:
+    """The result and checkpoint paths of a run of `sc` (read from `source`), checked before any
+    computation (`guard.outputs`; its disk use by `scenario.estimate.run_needs`) and their folder
+    made: the checkpoint is the result's name with .ckpt; an existing one is only ever replaced
+    or removed by the run that resumes from it. Returns the checkpoint's path."""
+    from .guard.exits import InputError
+    from .guard.outputs import OutputPlan, check_name_lengths
+    from .guard.resources import check_disk
+    from .scenario.estimate import run_needs
+
+    checkpoints = sc.simulation.checkpoint_every > 0
+    given = None if resume is None else (resume if resume.suffix == ".ckpt" or not resume.name
+                                         else resume.with_suffix(".ckpt"))
+    if given is not None:
+        check_name_lengths(given, "--resume")  # a name the file system refuses is a wrong name (exit 2)
+    plan = OutputPlan(reserved={".ckpt": "the .ckpt suffix is kept for checkpoints; give the result a .nc name"})
+    plan.add_inputs(S.scenario_file(source), *S.referenced_files(sc), given)
+    plan.file(output, "-o")
+    plan.check()
+    check_disk(run_needs(sc).result * (2 if checkpoints else 1), output.absolute().parent, f"-o {output}: the result")
+    ckpt = output.with_suffix(".ckpt")
+    resuming = given is not None and given.exists() and given.resolve() == ckpt.resolve()
+    if checkpoints and ckpt.exists() and not resuming:
+        raise InputError(f"{ckpt} exists (the checkpoint of an earlier run?): continue it with --resume {ckpt}, or move "
+                         "it away")
+    plan.prepare()
+    return ckpt
+
+
+def summary_rows(s: dict) -> list[tuple[str, str]]:
+    """The end-of-run table of a `summarize` dict: (label, value) rows."""
+    rows = [("steps", f"{s['steps']}"), ("wall time", f"{s['wall_time_s']:.2f} s"),
+            ("simulated time", f"{s['simulated_time_s'] * 1e3:.4f} ms")]
+    if "mean_iterations" in s:
+        rows.append(("mean iterations", f"{s['mean_iterations']:.2f}"))
+    if "min_step" in s:
+        rows.append(("smallest step", f"{s['min_step']:.3e} s"))
+    rows += [("input work", f"{s['input_work_J']:.6e} J"),
+             ("max balance error", f"{s['max_balance_error_J']:.3e} J ({s['max_balance_error_rel']:.2e} of input)")]
+    rows += [(f"peak speed {m}", f"{p['m_per_s']:.4f} m/s ({p['granule']})") for m, p in s["peak_speed"].items()]
+    eq = s.get("equilibrium")
+    if eq:
+        rows.append(("equilibrium", f"{int(eq['loaded_pairs'])} pairs and {int(eq['loaded_walls'])} wall contacts "
+                                    f"loaded, {int(eq['iterations'])} Newton iterations, residual {eq['residual_N']:.1e} N"))
+        rows.append(("equilibrium forces", f"largest: pair {eq['max_pair_force_N']:.4g} N, wall "
+                                           f"{eq['max_wall_force_N']:.4g} N, solid {eq['max_solid_force_N']:.4g} N; "
+                                           f"deepest overlap {eq['max_overlap_m']:.3e} m"))
+    rows.append(("output", s.get("output", "")))
+    return rows
 
 
 def legacy_model_record(ds):
@@ -165,23 +209,27 @@ def legacy_model_record(ds):
     finally:
         if folder is not None:
             shutil.rmtree(folder, ignore_errors=True)
-    return model_record(problem.system, problem.solid)
+    return model_record(problem.system, problem.solid), {"solver_ledger_tol": problem.settings.ledger_tol}
 
 
 def with_model_record(ds, name="result"):
     """The result Dataset `ds` with its model record: as stored, or, for a result of an earlier
-    granel, built once by `legacy_model_record` and added (after `io.model.check_result_model`).
-    ResultFileError (code 2) naming `name` if its scenario cannot be built or does not fit it."""
+    granel (no record, or one of an earlier layout), built once by `legacy_model_record` and added
+    (after `io.model.check_result_model`) with the solver attributes it lacked. ResultFileError
+    (code 2) naming `name` if its scenario cannot be built or does not fit it."""
     from .io.model import check_result_model, has_record, with_record
 
     if has_record(ds):
         return ds
     try:
-        rec = legacy_model_record(ds)
+        rec, attrs = legacy_model_record(ds)
     except Exception as e:  # noqa: BLE001 - invalid TOML, an invalid or unbuildable scenario
         raise _bad_scenario(name, e) from None
     check_result_model(ds, rec, name)
-    return with_record(ds, rec)
+    out = with_record(ds, rec)
+    if out.attrs.get("solver_integrator") == "exact":
+        out.attrs.update({k: v for k, v in attrs.items() if k not in out.attrs})
+    return out
 
 
 def _bad_scenario(name, e: Exception):
@@ -230,7 +278,7 @@ def summarize(ds) -> dict:
         "simulated_time_s": float(ds["time"].values[-1]),
         "input_work_J": wmax,
         "max_balance_error_J": float(err.max()) if err.size else 0.0,
-        "max_balance_error_rel": float(err.max() / wmax) if wmax > 0 else float(err.max()),
+        "max_balance_error_rel": relative_balance_error(ds) if wmax > 0 else float(err.max()),
         "peak_speed": {},
     }
     for m in np.unique(ds["medium"].values):

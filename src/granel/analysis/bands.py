@@ -1,23 +1,8 @@
-"""Band measures of a transmissibility curve: where a pass band ends, its 20 dB point, and a
-second (optical) band beyond a gap, read from the curve's values in dB on a frequency grid.
-
-Definitions (docs/narrowband.md, "Band measures"), for y_k = 20 log10 T(f_k), f ascending:
-- the stop band starts at the first f_s whose y lies more than DROP (20 dB) below the mean of
-  the y before it and falls on to the next frequency (a dip between two resonances rises again);
-  the pass band is the frequencies below f_s, and its level L the mean of their y [dB];
-- its edge (the cut-off) is where y last falls through L - EDGE (3 dB: half the power of the
-  pass band's level) at or before f_s;
-- its 20 dB point is where y last falls through L - DROP at or before f_s;
-- a second band above it: the highest y beyond f_s, if it rises at least DROP out of the gap's
-  floor (the lowest y between); the band is the run of frequencies around that peak above the
-  half-way level (in dB) between the floor and the peak; its level L2 is their mean; its bottom
-  is where y first rises through L2 - EDGE above f_s, its top where y last falls through it;
-- the gap's mean attenuation: L less the mean of y over the grid frequencies strictly between
-  the first band's edge and the second band's bottom.
-A crossing between two grid points is placed by linear interpolation of y in f, or, given the
-curve as a function (`curve`), by the last root of y(f) - level in that interval, found on a
-fine grid of REFINE points and then by Brent's method.
-"""
+"""Band measures of a transmissibility curve, from its values in dB on a frequency grid: a pass
+band's level, its edge (the cut-off, EDGE below the level) and its 20 dB point (DROP below it),
+and a second (optical) band beyond a gap, with the gap's mean attenuation. A crossing is
+interpolated between grid points, or found on the curve itself when it is given as a function.
+docs/narrowband.md ("Band measures") gives the definitions."""
 
 from __future__ import annotations
 
@@ -92,7 +77,8 @@ def _last_fall(y, level: float, upto: int) -> int:
 
 
 def pass_band(f, y_db, curve=None) -> PassBand:
-    """The first pass band of the curve y_db [dB] on the grid f [Hz] (module docstring)."""
+    """The first pass band of the curve y_db [dB] on the grid f [Hz] (docs/narrowband.md, "Band
+    measures")."""
     f, y = np.asarray(f, float), np.asarray(y_db, float)
     s = next((k for k in range(1, len(y)) if y[k] < np.mean(y[:k]) - DROP and (k == len(y) - 1 or y[k + 1] < y[k])),
              None)
@@ -106,8 +92,8 @@ def pass_band(f, y_db, curve=None) -> PassBand:
 
 
 def second_band(f, y_db, first: PassBand, curve=None) -> SecondBand:
-    """The second pass band beyond `first`'s stop band, and the gap's attenuation (module
-    docstring)."""
+    """The second pass band beyond `first`'s stop band, and the gap's attenuation
+    (docs/narrowband.md, "Band measures")."""
     f, y = np.asarray(f, float), np.asarray(y_db, float)
     none = SecondBand(math.nan, math.nan, math.nan, NAN_INTERVAL, NAN_INTERVAL, math.nan)
     s = first.stop

@@ -1,22 +1,8 @@
-"""A precompressed chain of a run, linearised about its static state, and its bands.
-
-The chain is read from a run's static equilibrium (`simulation.equilibrate`): the loaded pairs
-must form one straight line of beads, whose ends may press on rigid walls or on the solid.
-Linearised about that state, each contact is a spring k = dF/d(delta) = 3/2 A delta0^(1/2) and a
-dashpot c = gamma = G delta0^(1/4) (eqs. 2-3 differentiated, `granular.contact`), and the beads
-move along the chain's axis only (no friction acts on a straight chain pushed along itself). Its
-harmonic response at angular frequency w solves (K + i w C - w^2 M) u = F e_a
-(`chain_response`).
-
-The infinite chains' band edges (`band_edges`, Brillouin, "Wave propagation in periodic
-structures", 1946, ch. 1; Kittel, "Introduction to solid state physics", ch. 4, "two atoms per
-primitive basis"), for beads of mass m joined by springs K:
-- monatomic: w^2 = (4 K / m) sin^2(q a / 2), the cut-off w_c = 2 sqrt(K / m);
-- diatomic, masses m1 > m2 alternating (every spring joins a heavy bead to a light one, so one K),
-  a the cell's length: w^2 = K (1/m1 + 1/m2) -+ K sqrt((1/m1 + 1/m2)^2 - 4 sin^2(q a / 2) /
-  (m1 m2)); at the zone boundary (q a = pi) the acoustic band tops at sqrt(2 K / m1), the optical
-  band starts at sqrt(2 K / m2), and it ends (q = 0) at sqrt(2 K (1/m1 + 1/m2)).
-"""
+"""A precompressed chain of a run, linearised about its static state: springs and dashpots from
+the contact law of eqs. (2)-(3) differentiated (`linear_chain`), its exact harmonic response
+(K + i w C - w^2 M) u = F e_a (`chain_response`), and the band edges of the infinite monatomic or
+diatomic chain with its masses and springs (`band_edges`). docs/narrowband.md ("Band measures")
+gives the definitions and the band edges' formulas."""
 
 from __future__ import annotations
 
@@ -26,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..granular.contact import contact_law_derivatives
-from ..granular.materials import pair_coefficients, point_coefficient, static_overlap, wall_coefficients
+from ..granular.contact import hertz_overlap
+from ..granular.materials import pair_coefficients, point_coefficient, wall_coefficients
 
 # beads of one mass within this share; springs of one stiffness within this share (the
 # equilibrium's residual, 1e-10 of the load, spreads the contacts' forces far less)
@@ -56,9 +43,9 @@ class ChainEnd:
 
 @dataclass(frozen=True)
 class LinearChain:
-    """A precompressed chain linearised about its static state (module docstring): its beads
-    end to end (labels and indices in the run), masses, the springs and dashpots between
-    neighbours, both ends, and its unit axis (first bead to last)."""
+    """A precompressed chain linearised about its static state (docs/narrowband.md, "Band
+    measures"): its beads end to end (labels and indices in the run), masses, the springs and
+    dashpots between neighbours, both ends, and its unit axis (first bead to last)."""
 
     beads: tuple[str, ...]
     index: tuple[int, ...]
@@ -143,7 +130,7 @@ def chain_contacts(ds, system):
         for c, F in enumerate(np.asarray(ds["contact_force_normal"].values[0], float)):
             if F > 0:  # pressed on the solid at rest: its overlap from Hertz's law, eq. (2)
                 g = int(system.points.g[c])
-                held.setdefault(g, []).append(("solid", -1, float(static_overlap(F, system.points.A[c]))))
+                held.setdefault(g, []).append(("solid", -1, float(hertz_overlap(F, system.points.A[c]))))
     if not pairs:
         raise ChainError("no pair of granules is pressed at equilibrium: there is no precompressed chain")
     nbrs: dict[int, list[int]] = {}
@@ -186,18 +173,17 @@ def chain_axis(ds, system, order) -> np.ndarray:
 
 
 def linear_chain(ds, system) -> LinearChain:
-    """The run's precompressed chain linearised about its static state (module docstring):
+    """The run's precompressed chain linearised about its static state (docs/narrowband.md):
     springs and dashpots of its pairs (eq. 4's E*, R*, m* of the two beads), of its walls
     (`materials.wall_coefficients`: no dashpot at an undamped wall) and of the solid (its
     massless layer: m* = 0, no dashpot; its contact point taken as immovable). ChainError when
     the run has no such chain."""
     order, pairs, held = chain_contacts(ds, system)
     axis = chain_axis(ds, system, order)
-    E, nu, R, m = system.E, system.nu, system.radius, system.mass
     alpha = system.law.alpha_n
     k, c = [], []
     for a, b in zip(order[:-1], order[1:]):
-        A, G = pair_coefficients(E[a], nu[a], R[a], m[a], E[b], nu[b], R[b], m[b], alpha)
+        A, G = pair_coefficients(system.bodies(a), system.bodies(b), alpha)
         kk, cc = linear_contact(A, G, pairs[(min(a, b), max(a, b))])
         k.append(kk)
         c.append(cc)
@@ -209,15 +195,15 @@ def linear_chain(ds, system) -> LinearChain:
         kk = cc = 0.0
         for holder, w, d in held[g]:
             if w >= 0:
-                A, G = wall_coefficients(E[g], nu[g], R[g], m[g], alpha, system.walls[w].damped)
+                A, G = wall_coefficients(system.bodies(g), alpha, system.walls[w].damped)
             else:
-                A, G = point_coefficient(E[g], nu[g], R[g]), 0.0
+                A, G = point_coefficient(system.bodies(g)), 0.0
             dk, dc = linear_contact(A, G, d)
             kk, cc = kk + dk, cc + dc
         ends.append(ChainEnd(" + ".join(h for h, _, _ in held[g]), kk, cc))
-    return LinearChain(tuple(system.labels[g] for g in order), tuple(int(g) for g in order),
-                       np.asarray(m[order], float), np.array(k), np.array(c), (ends[0], ends[1]),
-                       (float(axis[0]), float(axis[1])))
+    return LinearChain(beads=tuple(system.labels[g] for g in order), index=tuple(int(g) for g in order),
+                       mass=np.asarray(system.mass[order], float), stiffness=np.array(k), damping=np.array(c),
+                       ends=(ends[0], ends[1]), axis=(float(axis[0]), float(axis[1])))
 
 
 def chain_matrices(chain: LinearChain) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -267,7 +253,7 @@ def chain_response(chain: LinearChain, frequency: float, driven: str) -> ChainRe
 
 
 def band_edges(chain: LinearChain) -> BandEdges | None:
-    """The infinite chain's band edges with this chain's masses and springs (module docstring),
+    """The infinite chain's band edges with this chain's masses and springs (docs/narrowband.md),
     for a monatomic chain (one mass, one K) or a diatomic one (two masses alternating, one K);
     None for any other."""
     m, k = chain.mass, chain.stiffness

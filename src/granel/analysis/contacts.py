@@ -29,13 +29,12 @@ def peak_pair_force(ds, system) -> float:
     if not len(pairs):
         return 0.0
     i, j = pairs[:, 0], pairs[:, 1]
-    R, E, nu, m = system.radius, system.E, system.nu, system.mass
-    A = pair_coefficients(E[i], nu[i], R[i], m[i], E[j], nu[j], R[j], m[j], 0.0)[0]
+    A = pair_coefficients(system.bodies(i), system.bodies(j), 0.0)[0]
     x, y = ds["x"].values, ds["y"].values  # (time, granule)
     peak = 0.0
     for start in range(0, x.shape[0], 512):  # blocks of outputs: memory stays at 512 x pairs
         gap = np.hypot(x[start:start + 512, j] - x[start:start + 512, i], y[start:start + 512, j] - y[start:start + 512, i])
-        peak = max(peak, float(hertz_force_stiffness(A, R[i] + R[j] - gap)[0].max()))
+        peak = max(peak, float(hertz_force_stiffness(A, system.radius[i] + system.radius[j] - gap)[0].max()))
     return peak
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..granular.bundles import state_size, state_views
 from ..granular.materials import granule_volume
 
 
@@ -50,13 +51,12 @@ def granule_states(ds, idx: np.ndarray) -> np.ndarray:
     """The granular state vectors y (see granular.kernels) at output indices idx: (len(idx), 6n+3)."""
     x, y = ds["x"].values[idx], ds["y"].values[idx]
     n = x.shape[1]
-    Y = np.zeros((len(idx), 6 * n + 3))
-    Y[:, 0 : 2 * n : 2] = x
-    Y[:, 1 : 2 * n : 2] = y
-    Y[:, 2 * n : 3 * n] = ds["theta"].values[idx]
-    Y[:, 3 * n : 5 * n : 2] = ds["v_x"].values[idx]
-    Y[:, 3 * n + 1 : 5 * n : 2] = ds["v_y"].values[idx]
-    Y[:, 5 * n : 6 * n] = ds["omega"].values[idx]
+    Y = np.zeros((len(idx), state_size(n)))
+    v = state_views(Y, n)
+    v.pos[..., 0], v.pos[..., 1] = x, y
+    v.theta[:] = ds["theta"].values[idx]
+    v.vel[..., 0], v.vel[..., 1] = ds["v_x"].values[idx], ds["v_y"].values[idx]
+    v.spin[:] = ds["omega"].values[idx]
     return Y
 
 
@@ -72,7 +72,7 @@ def granule_energies(system, Y: np.ndarray, SU: np.ndarray | None = None) -> np.
     st = Stepper(system)
     out = np.empty((len(Y), n))
     for f, y in enumerate(Y):
-        st.maybe_refresh(y[: 2 * n].reshape(-1, 2))
+        st.maybe_refresh(state_views(y, n).pos)
         kin, rot, pot = st.energies(GranularState(y, 0.0), None if SU is None else SU[f])
         out[f] = kin + rot + pot
     return out

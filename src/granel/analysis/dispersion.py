@@ -1,19 +1,8 @@
-"""Analytic dispersion of the solids' waves, independent of their finite-element models.
-
-The plate is a plane-stress strip: its in-plane waves run along the strip's length and are
-guided by its two free long edges, a layer of thickness h (the strip's width) whose bulk speeds
-are the plane-stress ones (`plane_stress_speeds`). Within the plane the layer is a 2-D elastic
-medium, so its guided waves are the Rayleigh-Lamb modes with those two speeds (Graff, "Wave
-Motion in Elastic Solids", sec. 8.1; Rose, "Ultrasonic Guided Waves in Solids", ch. 6):
-
-    tan(q h/2) / tan(p h/2) = -4 k^2 p q / (q^2 - k^2)^2        (symmetric)
-    tan(q h/2) / tan(p h/2) = -(q^2 - k^2)^2 / (4 k^2 p q)      (antisymmetric)
-
-with p^2 = (w / c_p)^2 - k^2 and q^2 = (w / c_s)^2 - k^2. `rayleigh_lamb` evaluates them in a
-form without poles (`rayleigh_lamb` says how); `lamb_frequencies` finds their roots in frequency
-at each wavenumber (sign changes on a scan, then bisection). The beam's branch is
-Euler-Bernoulli's (`euler_bernoulli_frequency`).
-"""
+"""Analytic dispersion of the solids' waves, independent of their finite-element models: the
+Rayleigh-Lamb branches of the plate as a plane-stress strip (`rayleigh_lamb`, `lamb_frequencies`;
+the bulk speeds from eq. 7, `plane_stress_speeds`) and the beam's Euler-Bernoulli branch of
+eq. (9) (`euler_bernoulli_frequency`). docs/wavefield.md ("Analytic branches") gives the
+equations and how their roots are found."""
 
 from __future__ import annotations
 
@@ -115,19 +104,11 @@ def _terms(omega, k, h: float, speeds: WaveSpeeds, family: str) -> tuple[np.ndar
 
 def rayleigh_lamb(omega, k, h: float, speeds: WaveSpeeds, family: str):
     """The Rayleigh-Lamb function of a layer of thickness h, zero on its `family`'s branches
-    (angular frequencies `omega` and wavenumbers `k` broadcast).
-
-    With X = p h/2, Y = q h/2, K = k h/2, the symmetric equation times (h/2)^4 / Y,
-    (Y^2 - K^2)^2 cos X sin(Y)/Y + 4 K^2 X sin X cos Y, and the antisymmetric one times
-    (h/2)^4 / X, (Y^2 - K^2)^2 sin(X)/X cos Y + 4 K^2 cos X Y sin Y. cos x, sin(x)/x and
-    x sin x are even in x, so both are real and finite for real or imaginary p and q (no poles,
-    no branch cut); each term is scaled by exp(-|Im X| - |Im Y|), which keeps their signs and
-    roots. w = 0 is a root of both for k > 0 (the rigid translation), left out by the scans.
-
-    Near w = 0 the two terms cancel; with P = w h / (2 c_p), S = w h / (2 c_s) (X^2 = P^2 - K^2,
-    Y^2 = S^2 - K^2) and D = `_cross`, they are rearranged as -4 K^4 D + (S^4 - 4 K^2 S^2) cos X
-    sin(Y)/Y + 4 K^2 P^2 sin(X)/X cos Y (symmetric) and 4 K^2 (K^2 - S^2) D + S^4 sin(X)/X cos Y
-    (antisymmetric), each term vanishing at w = 0 by itself."""
+    (angular frequencies `omega` and wavenumbers `k` broadcast): the family's equation multiplied
+    out without poles, real and finite for real or imaginary p and q, each term scaled by
+    exp(-|Im p| h/2 - |Im q| h/2) and arranged so that no two terms cancel near w = 0
+    (docs/wavefield.md, "Analytic branches"). w = 0 is a root of both families for k > 0 (the
+    rigid translation)."""
     a, b = _terms(omega, k, h, speeds, family)
     return a + b
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solid.modal import mode_energy
+
 
 def modal_coordinates(ds, modes=None, model=None):
     """(times, X (nt, nm), Xdot (nt, nm), omega (nm)) from a result Dataset.
@@ -36,8 +38,9 @@ def modal_coordinates(ds, modes=None, model=None):
 
 
 def modal_energies(X, Xdot, omega) -> np.ndarray:
-    """E_n(t) = 1/2 (Xdot^2 + w^2 X^2), eq. (15): shape (nt, nm)."""
-    return 0.5 * (Xdot**2 + (omega[None, :] * X) ** 2)
+    """E_n(t) of eq. (15) (`solid.modal.mode_energy`, kinetic plus strain): shape (nt, nm)."""
+    kinetic, strain = mode_energy.py_func(np.asarray(X, float), np.asarray(Xdot, float), np.asarray(omega, float)[None, :])
+    return kinetic + strain
 
 
 def accumulated_modal_energy(E: np.ndarray, counts=(6, 100, 1000)) -> dict[int, np.ndarray]:

@@ -12,33 +12,37 @@ drive periods repeat; it locks to m drive periods when s(t + m T) = s(t) there.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
 import scipy.linalg
 
+from ..granular.loads import Harmonic, load_history
+from ..io.model import read_record
 from .chain import ChainError, LinearChain, band_edges, chain_matrices, linear_chain
 from .signals import damped_modes
 
 
 @dataclass(frozen=True)
 class Drive:
-    """A harmonic drive of a run: granule label, frequency [Hz], force amplitude [N], start t0."""
+    """A harmonic drive of a run: granule label, frequency [Hz], force amplitude [N], start t0,
+    and the periods of its ramp."""
 
     granule: str
     frequency: float
     amplitude: float
     t0: float
+    ramp_cycles: float = 0.0
 
 
 def drive_of(ds) -> Drive:
-    """The (first) harmonic excitation of a result Dataset, from its scenario."""
-    sc = tomllib.loads(ds.attrs["scenario"])
-    for e in sc.get("excitations", []):
-        if e.get("kind") == "harmonic":
-            return Drive(e["granule"], float(e["frequency"]), float(e["amplitude"]), float(e.get("t0", 0.0)))
+    """The (first) harmonic load of a result Dataset (`granular.loads.Harmonic`, from its record)."""
+    rec = read_record(ds)
+    for e in rec.loads:
+        h = load_history(e.kind, e.params)
+        if isinstance(h, Harmonic):
+            return Drive(rec.labels[e.granule], h.frequency, h.amplitude, h.t0, h.ramp_cycles)
     raise ValueError("the run has no harmonic excitation")
 
 
@@ -227,10 +231,8 @@ def _mode_of(t, q) -> tuple[float, float, float] | None:
 def _load_fields(system, what: str = "amplitude") -> str:
     """The scenario fields that set the chain ringing: the transient loads' amplitudes (`what` =
     "amplitude") or durations ("duration")."""
-    names = {"amplitude": {"half_sine": "fmax", "table": "file"},
-             "duration": {"half_sine": "tau", "burst": "cycles", "table": "file"}}[what]
-    fields = [f"excitations.{k}.{names.get(e.history.kind, what)}" for k, e in enumerate(system.excitations)
-              if e.history.kind != "constant"]
+    fields = [f"excitations.{k}.{e.history.size_field if what == 'amplitude' else e.history.length_field}"
+              for k, e in enumerate(system.excitations) if not e.history.static]
     fields += [f"the motion of wall {w.name or '?'} ({what})" for w in system.walls if w.drive is not None]
     return ", ".join(fields) or "initial_velocities"
 
@@ -241,7 +243,7 @@ def _free_start(system, t_end: float) -> tuple[float, bool]:
     end of the run."""
     start, driven = 0.0, False
     for k, e in enumerate(system.excitations):
-        if e.history.kind == "constant":
+        if e.history.static:
             continue
         driven = True
         end = e.history.end_time
@@ -269,22 +271,13 @@ def _duration_for(t_first: float, span: float, output_every: float) -> float:
 def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 0.1,
                      rtol: float = 1e-3) -> ChainCutoff:
     """The band edges of a precompressed monatomic or diatomic chain, measured from a run in which
-    a transient load sets it ringing: the frequency of the chain's highest normal mode in the
-    free response (`damped_modes` on its modal coordinate) over that mode's share of the
-    infinite chain's top band edge, for the chain's masses and ends (`_chain_modes`): the
-    cut-off f_c = (1/pi) sqrt(K / m) of a monatomic chain; the optical band's top
-    sqrt(2 K (1/m1 + 1/m2)) / 2 pi of a diatomic one, whose other edges (`analysis.chain.band_edges`)
-    scale with it (every edge goes as sqrt(K), the one stiffness measured).
-
-    The chain's ends may press on rigid walls or on the solid: each is an end spring of its
-    contact's Hertz stiffness (the solid's contact point taken as immovable: exact for a rigid
-    solid; for a plate or beam `end_shift` says how much a free end would move the answer).
-    The free response must hold `min_periods` periods of the top mode, no contact's overlap may
-    swing by more than `max_strain` of its static value, and the top mode may move by at most
-    `rtol` when the last quarter of the record is left out. CutoffError (a ValueError) says why
-    a run cannot give a cut-off and which field to change. `system` is the run's granular
-    system (`analysis.result_model.result_system(ds)`). docs/design.md ("An inverse problem: a
-    chain's cut-off") gives the method, its checks and its bias."""
+    a transient load sets it ringing: its top mode's frequency in the free response over that
+    mode's share of the infinite chain's top band edge (f_c = (1/pi) sqrt(K / m) for a monatomic
+    chain, sqrt(2 K (1/m1 + 1/m2)) / 2 pi for a diatomic one). `system` is the run's granular
+    system (`analysis.result_model.result_system(ds)`); `min_periods`, `max_strain` and `rtol`
+    bound the checks, and CutoffError (a ValueError) says why a run gives no cut-off and what to
+    change. docs/design.md ("An inverse problem: a chain's cut-off") gives the method, its checks
+    and its bias."""
     chain, edges = _periodic_chain(ds, system)
     order, axis = list(chain.index), np.array(chain.axis)
     n = chain.n

@@ -1,23 +1,15 @@
-"""Reciprocity metrics for a pair of runs with swapped excitation and measurement points.
-
-Forward run: the shock on granule A, the response measured at granule B; backward run: the
-shock on B, measured at A. For a linear, reciprocal system v_B(fwd) . d_B equals v_A(bwd) . d_A,
-where d_X is the direction of the force applied at X in the run that excites X (Betti-Rayleigh
-reciprocity with identical load histories). The paper's Fig. 3
-compares v_3C (granule 3 when C is shocked) with v_C3 (granule C when 3 is shocked).
-
-Nonreciprocity index (ours):
-    NRI = ||s_fwd - s_bwd||_2 / (||s_fwd||_2 + ||s_bwd||_2)  in [0, 1],
-with s_fwd(t) = v_B(t) . d_B from the forward run and s_bwd(t) = v_A(t) . d_A from the backward
-run, on the common time grid. NRI = 0 for a reciprocal response, 1 when the two signals are
-opposite; it is scale-free, so shock levels can be compared.
-"""
+"""Reciprocity metrics for a pair of runs with swapped excitation and measurement points (the
+paper's Fig. 3 compares v_3C with v_C3): arrivals, peaks, energy shares, the spectral centroid of
+the modal energies of eq. (15), and granel's nonreciprocity index
+NRI = ||s_fwd - s_bwd||_2 / (||s_fwd||_2 + ||s_bwd||_2) in [0, 1]. docs/analysis.md
+("Reciprocity") defines the signals and the metrics."""
 
 from __future__ import annotations
 
-import tomllib
-
 import numpy as np
+
+from ..granular.loads import KINDS
+from ..io.model import read_record
 
 
 def arrival_time(t, signal, fraction: float = 0.05, reference: float | None = None) -> float:
@@ -63,24 +55,39 @@ def driven_peak_speed(ds, label: str) -> float:
 
 
 def excitation_of(ds) -> tuple[str, np.ndarray]:
-    """(granule label, unit direction) of the first excitation of a run; without excitations,
-    of its first initial velocity (a striker)."""
-    sc = tomllib.loads(ds.attrs["scenario"])
-    if not sc.get("excitations"):
-        if not sc.get("initial_velocities"):
+    """(granule label, unit direction) of the first load of a run (its model record); without
+    loads, of its first striker, along its initial velocity."""
+    rec = read_record(ds)
+    if not rec.loads:
+        if not rec.strikers:
             raise ValueError("the run has neither an excitation nor an initial velocity: nothing was driven")
-        iv = sc["initial_velocities"][0]
-        v = np.asarray(iv["v"], float)
-        return iv["granule"], v / np.hypot(*v) if np.hypot(*v) > 0 else v
-    e = sc["excitations"][0]
-    d = e.get("direction", "toward_solid")
-    label = e["granule"]
-    if isinstance(d, str):
-        vec = toward_solid(sc, label) * (1.0 if d == "toward_solid" else -1.0)
-    else:
-        vec = np.asarray(d, float)
-        vec = vec / np.hypot(*vec)
-    return label, vec
+        g = rec.strikers[0]
+        v = np.array([ds["v_x"].values[0, g], ds["v_y"].values[0, g]], float)
+        return rec.labels[g], v / np.hypot(*v) if np.hypot(*v) > 0 else v
+    e = rec.loads[0]
+    return rec.labels[e.granule], np.asarray(e.direction, float)
+
+
+def toward_solid(ds, label: str) -> np.ndarray:
+    """Unit vector from granule `label` toward the solid (the record's; NaN for a medium away
+    from the solid)."""
+    rec = read_record(ds)
+    return np.asarray(rec.toward_solid[rec.labels.index(label)], float)
+
+
+def measured_along(ds, label: str) -> np.ndarray:
+    """The direction granule `label`'s response is measured along: toward the solid for a medium
+    beside it; for one away from the solid, the run's drive direction (`excitation_of`)."""
+    d = toward_solid(ds, label)
+    return d if np.isfinite(d).all() else excitation_of(ds)[1]
+
+
+def pushed_along(ds, label: str) -> np.ndarray:
+    """The direction the run's first load would push granule `label`: toward (or away from) the
+    solid for `label`'s medium when the load was given so, else the load's own vector."""
+    e = read_record(ds).loads[0]
+    d = toward_solid(ds, label) * e.toward
+    return d if e.toward != 0 and np.isfinite(d).all() else np.asarray(e.direction, float)
 
 
 def directed_velocity(ds, label: str, direction) -> np.ndarray:
@@ -139,21 +146,10 @@ def static_loads(ds) -> list[tuple[int, np.ndarray]]:
     """The static preload of a run: (granule index, force vector [N]) of each constant load when
     the run starts from their equilibrium (`simulation.equilibrate`); [] otherwise (a constant
     load applied to a medium at rest is a step load, part of the dynamic input)."""
-    sc = tomllib.loads(ds.attrs["scenario"])
-    if not sc.get("simulation", {}).get("equilibrate", False) or "equilibrium_contact" not in ds:
+    if "equilibrium_contact" not in ds:  # the run did not start from a static equilibrium
         return []
-    labels = [str(g) for g in ds["granule"].values]
-    out = []
-    for e in sc.get("excitations", []):
-        if e.get("kind") != "constant":
-            continue
-        d = e.get("direction", "toward_solid")
-        if isinstance(d, str):
-            u = toward_solid(sc, e["granule"]) * (1.0 if d == "toward_solid" else -1.0)
-        else:
-            u = np.asarray(d, float) / np.hypot(*d)
-        out.append((labels.index(e["granule"]), float(e["value"]) * u))
-    return out
+    return [(e.granule, KINDS[e.kind].from_params(e.params).preload * np.asarray(e.direction, float))
+            for e in read_record(ds).loads if KINDS[e.kind].static]
 
 
 def static_work(ds, medium: str | None = None) -> np.ndarray:
@@ -173,11 +169,11 @@ def dynamic_input(ds) -> tuple[float, str | None]:
     when the scenario holds nothing dynamic: no transient load, moving wall or initial motion,
     and no constant load applied at rest (a preload's equilibrium residual moves the granules by
     round-off, which is no input)."""
-    sc = tomllib.loads(ds.attrs["scenario"])
+    rec = read_record(ds)
     preload = bool(static_loads(ds))
-    loads = [e for e in sc.get("excitations", []) if e.get("kind") != "constant" or not preload]
-    loads += [w for w in sc.get("walls", []) if w.get("motion")]
-    striker = bool(sc.get("initial_velocities"))
+    loads = [e for e in rec.loads if not KINDS[e.kind].static or not preload]
+    loads += [w for w in rec.walls if w.drive[1] > 0]  # a shaker (frequency > 0)
+    striker = bool(rec.strikers)
     if not loads and not striker:
         return float("nan"), ("nothing drives the run beyond its static preload (no transient load, moving wall or "
                               "initial motion)" if preload else "nothing drives the run (no load, moving wall or "
@@ -221,7 +217,7 @@ def run_metrics(ds, measured: str, modes=None, model=None) -> dict:
     t = ds["time"].values
     w, why = dynamic_input(ds)
     far = far_medium(ds, label)
-    v = directed_velocity(ds, measured, toward_solid(tomllib.loads(ds.attrs["scenario"]), measured))
+    v = directed_velocity(ds, measured, measured_along(ds, measured))
     e_far, why_far = dynamic_energy(ds, far)
     why_far = why or why_far
     e_solid = dynamic_energy(ds, None)[0] if "energy_solid" in ds else np.zeros_like(t)
@@ -246,13 +242,6 @@ def run_metrics(ds, measured: str, modes=None, model=None) -> dict:
         out["spectral_centroid_hz"] = nan
     out["notes"] = notes
     return out
-
-
-def toward_solid(sc: dict, label: str) -> np.ndarray:
-    """Unit vector from granule `label`'s medium toward the solid (scenario as a dict)."""
-    medium = label.split(":")[0]
-    side = next((m.get("side", "none") for m in sc["media"] if m["name"] == medium), "none")
-    return np.array([1.0, 0.0]) if side == "left" else np.array([-1.0, 0.0])
 
 
 def reciprocity_metrics(fwd, bwd, modes=None, model=None) -> dict:

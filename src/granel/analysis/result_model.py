@@ -9,8 +9,7 @@ import functools
 
 import numpy as np
 
-from ..granular.laws import KIND_CODES
-from ..granular.loads import LoadHistory, WallDrive
+from ..granular.loads import KINDS, WallDrive, load_history
 from ..granular.packing import Wall
 from ..granular.system import ContactLaw, Excitation, GranularSystem, SolidContact
 from ..io.model import read_record
@@ -23,16 +22,18 @@ from ..solid.recipe import SolidRecipe, build_solid_model
 def result_system(ds, name="result") -> GranularSystem:
     """The granular system of a result: granules, contact law, walls, solid contacts and loads."""
     rec = read_record(ds, name)
-    if any(e.kind not in KIND_CODES for e in rec.loads):
+    if any(e.kind not in KINDS for e in rec.loads):
         raise ResultFileError(f"{name}: damaged result (its model record: a load of unknown kind)", 2)
-    loads = [Excitation(e.granule, e.direction, LoadHistory(e.kind, e.params, np.array(e.times), np.array(e.values)))
-             for e in rec.loads]
-    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, WallDrive(*w.drive) if w.drive[1] != 0 else None, w.damped)
+    loads = [Excitation(e.granule, e.direction, load_history(e.kind, e.params, np.array(e.times), np.array(e.values)),
+                        e.toward) for e in rec.loads]
+    walls = [Wall(p0=w.p0, p1=w.p1, normal=w.normal, medium=w.medium, name=w.name,
+                  drive=WallDrive(*w.drive) if w.drive[1] != 0 else None, damped=w.damped)
              for w in rec.walls]
     contacts = [SolidContact(c.granule, c.position, c.normal, c.name) for c in rec.contacts]
-    return GranularSystem(list(rec.labels), rec.medium_index, list(rec.media), rec.position0, rec.radius, rec.mass,
-                          rec.inertia, rec.E, rec.nu, ContactLaw(rec.mu, rec.alpha_n, rec.k_s), walls, contacts, loads,
-                          rec.skin)
+    return GranularSystem(labels=list(rec.labels), medium_index=rec.medium_index, media=list(rec.media),
+                          pos0=rec.position0, radius=rec.radius, mass=rec.mass, inertia=rec.inertia, E=rec.E, nu=rec.nu,
+                          law=ContactLaw(rec.mu, rec.alpha_n, rec.k_s), walls=walls, solid_contacts=contacts,
+                          excitations=loads, skin=rec.skin, toward_solid=rec.toward_solid, strikers=rec.strikers)
 
 
 def result_solid(ds, name="result") -> SolidModel:

@@ -1,27 +1,9 @@
-"""The solid's wavefield along its length, in wavenumber and time (issue 31; the method of the
-reference study's 2025 follow-up, arXiv 2509.15415): pure functions of a result Dataset and its
-solid model. docs/wavefield.md states the definitions with their equations.
-
-1. `node_lines`: lines of nodes along the solid's length (y), at fixed positions across its width
-   (x): the plate's vertex columns, on which its Q8 field is exactly the quadratic through each
-   element side's three nodes, or the beam's nodes. The velocity (both in-plane components on
-   the plate, the deflection on the beam) is sampled on a uniform grid of each line.
-2. `spatial_basis`: the transform along the length that fits the ends: sines sin(n pi s / L)
-   where both ends are clamped (every velocity component vanishes there; DST-I), cosines where
-   both are free (DCT-I), quarter-wave sines sin((n + 1/2) pi s / L) clamped at one end and free
-   at the other (DST-III); s = y - y0.
-3. `wavenumber_spectrum`: the kinetic energy E(k, t) of each harmonic, summed over the width
-   (and kept per line): by the basis' orthogonality (Parseval) it adds up to the kinetic energy
-   of the sampled field; `band_field` transforms a band of harmonics back to space.
-4. `spectral_moments`: per time, the centroid, variance and Shannon entropy of E(k, t)
-   normalised to a distribution; `growth_exponent` fits the variance's power law.
-5. `frequency_wavenumber_map`: the whole record's power over wavenumber and frequency, through
-   Hann windows in time and along the length (a Fourier transform in both: a clamped end turns
-   a flexural standing wave's sine phase, so its sine transform puts it half a step off its
-   wavenumber; the windowed transform reads the wavenumber of the field between the ends);
-   `map_ridges` locates its ridges; `solid_branches` gives the analytic dispersion to draw over it
-   (`analysis.dispersion`).
-"""
+"""The solid's wavefield along its length, in wavenumber and time: pure functions of a result
+Dataset and its solid model. The node lines and the transform that fits the ends, the kinetic
+energy E(k, t) of each harmonic (and the modes' energy of eq. 15 shared over the harmonics), its
+moments and their growth law, band-filtered fields, and the frequency-wavenumber map with its
+ridges and the analytic branches (`analysis.dispersion`). docs/wavefield.md ("Method") states the
+definitions with their equations."""
 
 from __future__ import annotations
 
@@ -32,14 +14,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..io.results import ResultFileError
+from .modal import modal_energies
 from .dispersion import LambBranches, euler_bernoulli_frequency, lamb_branches, plane_stress_speeds
 
 ENDS = {(True, True): "clamped-clamped", (False, False): "free-free", (True, False): "clamped-free",
         (False, True): "free-clamped"}
-# the relative frequency error of quadratic finite elements with consistent mass, (kl)^4 / 1440 at
-# wavenumber k and element length l: the leading term [p!/(2p)!]^2 (kl)^2p / (2 (2p + 1)) of
-# Ainsworth (SIAM J. Numer. Anal. 42, 2004) for degree p = 2; the beam's Hermite cubics share it
-# (tests/test_wavefield.py: Bloch analyses of both elements)
+# the relative frequency error of quadratic finite elements with consistent mass is (kl)^4 / 1440 at
+# wavenumber k and element length l (docs/wavefield.md, "Which wavenumbers can be trusted")
 FE_DISPERSION = 1.0 / 1440.0
 # the frequency error the wavenumbers called resolved stay below (`resolved_wavenumber`)
 FE_ERROR = 0.0025
@@ -64,7 +45,7 @@ class SpatialBasis:
 
 
 def spatial_basis(y0: float, length: float, samples: int, clamped: tuple[bool, bool]) -> SpatialBasis:
-    """The basis of `ENDS[clamped]` on `samples` uniform points (module docstring, item 2):
+    """The basis of `ENDS[clamped]` on `samples` uniform points (docs/wavefield.md, "Method"):
     clamped-clamped: the interior points s_j = j L / (N + 1), k_n = n pi / L, n = 1..N;
     free-free: s_j = j L / (N - 1), j = 0..N-1 (both ends), k_n = n pi / L, n = 0..N-1;
     clamped at one end: s_j = j L / N, j = 1..N (the free end included), k_n = (n + 1/2) pi / L."""
@@ -321,25 +302,23 @@ def spectral_moments(k, energy, k_max: float = np.inf) -> SpectralMoments:
 def modal_spectrum(ds, lines: NodeLines, shapes: np.ndarray) -> np.ndarray:
     """The solid's energy over the harmonics, (N, nt) [J]: each mode's energy E_m = 1/2 (eta'^2 +
     w^2 eta^2) (eq. 15) shared over the harmonics as the kinetic energy of its sampled shape
-    (`harmonic_energy`, normalised to 1 per mode). Free of the exchange between kinetic and
-    strain energy that makes E(k, t) oscillate, it adds up to the solid's energy; the modes'
-    cross terms, which average out over time, are left out."""
+    (`harmonic_energy`, normalised to 1 per mode). It adds up to the solid's energy, less the
+    modes' cross terms (docs/wavefield.md, "The modal energy spectrum")."""
     n_modes = shapes.shape[1]
     a = forward(lines.basis, np.asarray(shapes, float).T.reshape(n_modes, *lines.shape))
     share = harmonic_energy(a, lines).sum(axis=0).T  # (modes, N)
     total = share.sum(axis=1, keepdims=True)
     share = np.divide(share, total, out=np.zeros_like(share), where=total > 0)
     eta, etad = np.asarray(ds["solid_eta"].values, float), np.asarray(ds["solid_eta_dot"].values, float)
-    energy = 0.5 * (etad**2 + (np.asarray(ds["mode_omega"].values, float) * eta) ** 2)
+    energy = modal_energies(eta, etad, np.asarray(ds["mode_omega"].values, float))
     return (energy @ share).T
 
 
 @dataclass(frozen=True)
 class PowerLaw:
     """sigma^2(t) = A (t - t0)^exponent fitted by least squares on the logarithms over
-    t0 < t <= t_end: the exponent with its standard error (the regression's, as if the residuals
-    were independent: neighbouring outputs are correlated, so it understates the uncertainty),
-    A [(rad/m)^2 / s^exponent], t0 and t_end [s] and the number of outputs used."""
+    t0 < t <= t_end: the exponent with the regression's standard error (docs/wavefield.md,
+    "Growth law"), A [(rad/m)^2 / s^exponent], t0 and t_end [s] and the number of outputs used."""
 
     exponent: float
     stderr: float
@@ -351,9 +330,8 @@ class PowerLaw:
 
 def growth_exponent(t, variance, t0: float, t_end: float) -> PowerLaw:
     """The variance's growth law over (t0, t_end] (`PowerLaw`): the straight line through
-    (ln(t - t0), ln sigma^2) by least squares. Exponent 1: the spread of a diffusion in k
-    (sigma^2 = sigma_0^2 + 2 D t with sigma_0 small); 2: ballistic; 0: a spectrum that stays put.
-    NaN with fewer than 3 outputs with a finite, positive variance."""
+    (ln(t - t0), ln sigma^2) by least squares. NaN with fewer than 3 outputs with a finite,
+    positive variance."""
     t = np.asarray(t, float)
     var = np.asarray(variance, float)
     sel = (t > t0) & (t <= t_end) & np.isfinite(var) & (var > 0)
@@ -444,9 +422,8 @@ def map_ridges(fk: FrequencyWavenumberMap, floor: float = 1e-3, k_max: float = n
                f_max: float = np.inf, reach: int = 3) -> Ridges:
     """The peaks of the map above `floor` times its largest value over k <= k_max and
     f <= f_max: the points that are the largest within `reach` bins of the unpadded transforms
-    each way in k and in f (a Hann window's first sidelobe lies 2.5 bins from its peak, so a
-    sidelobe is never taken for a peak; two peaks closer than that count as one), each refined
-    in f and in k by `parabolic_peak`. The map's edges are left out."""
+    each way in k and in f (docs/wavefield.md, "Ridges"), each refined in f and in k by
+    `parabolic_peak`. The map's edges are left out."""
     from scipy.ndimage import maximum_filter
 
     P = fk.power
@@ -510,7 +487,7 @@ class Measures:
 
 @dataclass(frozen=True)
 class Wavefield:
-    """The wavefield analysis of one result (module docstring): its node lines, the spectrum
+    """The wavefield analysis of one result (docs/wavefield.md): its node lines, the spectrum
     (amplitudes and E(k, t)) with the `kinetic` measures (moments over k <= k_max, the variance's
     growth law over the fit window), the same `modal` measures of the modal energy spectrum
     (`modal_spectrum`; None for a result that stores no modal state), the energy's arrival [s],
@@ -559,15 +536,27 @@ def default_bands(k_max: float, count: int = 4) -> np.ndarray:
     return np.column_stack([edges[:-1], edges[1:]])
 
 
-def analyse_wavefield(ds, model, modes=None, bands=None, k_max: float | None = None, fit=None, pad: int = 4,
-                      branch_count: int = 3, progress=None, name="result") -> Wavefield:
-    """The `Wavefield` of result `ds` with solid `model` (its `modes` for a modal state). k_max:
-    the wavenumbers the moments take (default `resolved_wavenumber`); bands: (nb, 2) edges
-    [rad/m] (default 4 equal bands to k_max); fit: (t0, t_end) [s] of the growth law (default
-    from the arrival, the first output where the energy below k_max reaches 1 % of its largest,
-    to the end); the map is zero-padded `pad` times; `progress(what)` is called before each
+@dataclass(frozen=True)
+class WavefieldSettings:
+    """What `analyse_wavefield` computes: the moments over k <= `k_max` [rad/m] (None:
+    `resolved_wavenumber`), the `bands` (nb, 2) [rad/m] (None: 4 equal bands to k_max), the growth
+    law's window `fit` (t0, t_end) [s] (None: from the arrival, the first output where the energy
+    below k_max reaches 1 % of its largest, to the end), the map's zero-padding factor `pad` and
+    the analytic branches per family `branch_count`."""
+
+    bands: np.ndarray | None = None
+    k_max: float | None = None
+    fit: tuple[float, float] | None = None
+    pad: int = 4
+    branch_count: int = 3
+
+
+def analyse_wavefield(ds, model, modes=None, settings: WavefieldSettings | None = None, progress=None,
+                      name="result") -> Wavefield:
+    """The `Wavefield` of result `ds` with solid `model` (its `modes` for a modal state), computed
+    as `settings` say (default `WavefieldSettings()`); `progress(what)` is called before each
     stage. ValueError for a solid without a wavefield or fewer than 4 solid outputs."""
-    say = progress or (lambda what: None)
+    settings, say = settings or WavefieldSettings(), progress or (lambda what: None)
     lines = node_lines(model)
     t = np.asarray(ds["solid_time"].values, float)
     if len(t) < 4:
@@ -578,9 +567,10 @@ def analyse_wavefield(ds, model, modes=None, bands=None, k_max: float | None = N
     say("wavenumber spectrum")
     spectrum = wavenumber_spectrum(v, lines, t)
     k_res = resolved_wavenumber(lines)
-    k_max = k_res if k_max is None else float(k_max)
+    k_max = k_res if settings.k_max is None else float(settings.k_max)
     kinetic = spectral_moments(spectrum.k, spectrum.energy, k_max)
     arrival = arrival_time(t, kinetic.total)
+    fit = settings.fit
     t0, t_end = (arrival, float(t[-1])) if fit is None else (float(fit[0]), float(fit[1]))
 
     def measures(energy, moments):
@@ -590,17 +580,17 @@ def analyse_wavefield(ds, model, modes=None, bands=None, k_max: float | None = N
     if shapes is not None:
         energy = modal_spectrum(ds, lines, shapes)
         modal = measures(energy, spectral_moments(spectrum.k, energy, k_max))
-    bands = default_bands(k_max) if bands is None else np.asarray(bands, float).reshape(-1, 2)
+    bands = default_bands(k_max) if settings.bands is None else np.asarray(settings.bands, float).reshape(-1, 2)
     say("band-filtered fields")
     density = np.stack([energy_density(band_field(spectrum, lines, lo, hi), lines) for lo, hi in bands])
     say("frequency-wavenumber map")
-    fk = frequency_wavenumber_map(v, lines, t, pad)
+    fk = frequency_wavenumber_map(v, lines, t, settings.pad)
     k_window = window_wavenumber(lines)
     ridges = map_ridges(fk, 1e-3, k_max)
     ridges = Ridges(ridges.k[ridges.k >= k_window], ridges.f[ridges.k >= k_window], ridges.power[ridges.k >= k_window])
     say("dispersion branches")
     k_plot = float(min(fk.k[-1], 1.5 * k_max))
-    branches = solid_branches(model, np.linspace(0.0, k_plot, 241), branch_count)
+    branches = solid_branches(model, np.linspace(0.0, k_plot, 241), settings.branch_count)
     check = np.nan
     if "energy_solid_kinetic" in ds and "time" in ds:  # the solid's 1/2 v'M v, at the solid outputs
         ke = np.interp(t, np.asarray(ds["time"].values, float), np.asarray(ds["energy_solid_kinetic"].values, float))

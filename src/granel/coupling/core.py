@@ -1,21 +1,9 @@
 """The one compiled coupled-step core (Sec. II C, Appendices A and B), shared by every coupled
-solver. One accepted step tau_s -> tau_s+1 = tau_s + h:
-
-  1. the step size h = dt0 / 2^n from the step policy: constant, or the paper's (B1) with one
-     common step for all contacts (`step_level`);
-  2. the Newmark predictor at the contacts (A1)-(A2): their acceleration at s+1 is
-     a_pred + C F, C = B (M + K h^2/4)^-1 B' the contacts' compliance over the step;
-  3. the interface iteration (`interface_solve`) from the previous step's F: the contact motion
-     by the constant average acceleration (A3), RK4 for the granules under it, the forces G(F)
-     at s+1, until (A4) holds; by the paper's fixed point F <- G(F), or by Newton with the
-     contact law's derivatives (the paper's Assumption 3) and the exact local root for stiff
-     friction;
-  4. accept: Newmark (A2) with the converged forces, the granules' last RK4 state.
-
-The solid runs in mass-normalised modal coordinates with all modes kept (`advance_modal`): one
-scalar Newmark recursion per mode, C = P D P' (P = B Phi, D = 1 / (1 + w^2 h^2 / 4)); a rigid
-solid has no modes (C = 0). Solids too large for all modes use `coupling.sparse`.
-docs/coupling.md describes the step."""
+solver. A step: its size from the step policy (constant, or (B1): `step_level`); the Newmark
+predictor at the contacts (A1)-(A2); the interface iteration to (A4) (`interface_solve`: contact
+motion by (A3), the granules' RK4), by the fixed point F <- G(F) or by Newton (Assumption 3);
+accept by (A2). The solid runs on all its modes (`advance_modal`; a rigid solid has none);
+larger solids use `coupling.sparse`. docs/coupling.md ("One step") describes the step."""
 
 from __future__ import annotations
 
@@ -351,7 +339,7 @@ def interface_solve(y, t, h, model, pred, C, F, cfg, frame, w):
     for c in range(nc):
         for d in range(2):
             w.motion.u0[c, d] = pred.u[2 * c + d]
-    rate = 1.5 * friction_rate(y, model, w.motion)  # stiff friction: RK4 sub-steps (forces may grow in the step)
+    rate = friction_rate(y, model, w.motion)  # stiff friction: RK4 sub-steps
     for it in range(1, cfg.max_iterations + 1):
         if not interface_map(y, t, h, model, pred, C, F, rate, w, cfg.newton):
             copy2(F, w.F_start)

@@ -7,22 +7,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..granular.system import GranularState, GranularSystem, Stepper
-from ..solid.base import SolidModel
+from ..granular.system import Stepper
 from ..solid.modal import at_dofs
 from ..solid.reduction import static_modes
 from . import core
 from .frame import contact_frame, contact_normals
-from .observation import Observation, modal_energy, observe_outputs
+from .observation import Observation, OutputStates, modal_energy, observe_outputs
 from .protocol import Reached, SolverError, StepSink
-from .settings import SolverSettings
 
 
 class ModalSolver:
-    """The compiled core with the solid in modal coordinates, one output per `advance`."""
+    """The compiled core with the solid in modal coordinates, one output per `advance`; built from
+    the run's coupled problem (`granel.problem.Problem`) and the solid's eigenmodes."""
 
-    def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
-                 outputs_every: int, modes=None, preload=None):
+    def __init__(self, problem, modes=None):
+        system, state0, model, settings = problem.system, problem.state, problem.solid, problem.settings
+        outputs_every, preload = problem.schedule.per, problem.solid_force0
         self.system, self.model, self.settings = system, model, settings
         self.name = settings.method
         self.y0 = state0.y.copy()
@@ -104,8 +104,8 @@ class ModalSolver:
     def observe(self) -> Observation:
         st, nc = self.st, len(self.system.solid_contacts)
         energy = np.array([modal_energy(st.eta, st.etad, self.omega)])
-        return observe_outputs([self.t], st.y[None], st.u.reshape(1, nc, 2), energy, st.F[None], self.system,
-                               self.stepper.model, self.normals, self.solid.frame.tangent)
+        states = OutputStates(times=[self.t], y=st.y[None], su=st.u.reshape(1, nc, 2), solid_energy=energy, F=st.F[None])
+        return observe_outputs(states, self.system, self.stepper.model, self.normals, self.solid.frame.tangent)
 
     def solid_states(self, rows) -> dict:
         return {"eta": self.st.eta[None].astype(np.float32), "eta_dot": self.st.etad[None].astype(np.float32)}

@@ -9,9 +9,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK
+from ..granular.bundles import state_views
 from ..granular.kernels import granule_energies, overlaps, wall_forces
 from ..guard.jit import njit
+from ..solid.modal import mode_energy
 
 
 @njit(cache=True, inline="always")
@@ -32,13 +33,14 @@ def granular_energy(y, model, su):
 
 @njit(cache=True)
 def modal_energy(eta, etad, omega):
-    """The solid's kinetic and strain energy (eq. 11) in mass-normalised modal coordinates,
-    1/2 sum eta'^2 and 1/2 sum omega^2 eta^2 (eq. 15 summed over the modes)."""
+    """The solid's kinetic and strain energy (eq. 11): `solid.modal.mode_energy` (eq. 15) summed
+    over the modes."""
     kinetic = 0.0
     potential = 0.0
     for i in range(eta.shape[0]):
-        kinetic += 0.5 * etad[i] * etad[i]
-        potential += 0.5 * omega[i] ** 2 * eta[i] * eta[i]
+        k, p = mode_energy(eta[i], etad[i], omega[i])
+        kinetic += k
+        potential += p
     return kinetic, potential
 
 
@@ -146,23 +148,35 @@ class Observation:
                                        else getattr(self, f.name)[i: i + 1]) for f in fields(self)})
 
 
-def observe_outputs(times, Y, su, solid_energy, F, system, model, normals, tangents) -> Observation:
-    """The observation of a block of outputs from their states: granular states Y (K, ny), the
-    solid contact points' displacement su (K, nc, 2), the solid's (kinetic, potential) energy (K,
-    2), the interface forces on the solid F (K, nc, 2); `model` is the compiled bundle the states
-    were computed with, `system` names the contacts."""
+class OutputStates(NamedTuple):
+    """The states of a block of K outputs: their times (K,), the granular states y (K, ny), the
+    solid contact points' displacement su (K, nc, 2), the solid's (kinetic, potential) energy
+    (K, 2) and the interface forces on the solid F (K, nc, 2)."""
+
+    times: object
+    y: np.ndarray
+    su: np.ndarray
+    solid_energy: np.ndarray
+    F: np.ndarray
+
+
+def observe_outputs(states: OutputStates, system, model, normals, tangents) -> Observation:
+    """The observation of a block of outputs from their states; `model` is the compiled bundle the
+    states were computed with, `system` names the contacts, `normals` and `tangents` (nc, 2) are
+    the contact frame the interface forces are resolved in."""
     from ..granular.system import contact_label
 
-    times, Y = np.array(times, float), np.array(Y, float)  # copies: a solver may step its arrays on
+    times, Y = np.array(states.times, float), np.array(states.y, float)  # copies: a solver may step its arrays on
+    su, solid_energy, F = states.su, states.solid_energy, states.F
     K, n = len(times), system.n
     q = output_buffers(K, len(system.media), len(system.walls))
     output_quantities(Y, np.ascontiguousarray(su, float), model, system.medium_index, times, q)
     ek, ep = solid_energy[:, 0], solid_energy[:, 1]
-    dv, df, w = Y[:, 6 * n + ACC_VISC], Y[:, 6 * n + ACC_FRIC], Y[:, 6 * n + ACC_WORK]
+    v = state_views(Y, n)
+    dv, df, w = v.dissipated_viscous, v.dissipated_friction, v.input_work
     where = q.where
     ledger = energy_ledger.py_func(ek + ep, q.granular, dv, df, w)  # numpy's arithmetic, no kernel per layout
-    return Observation(times=times, pos=Y[:, : 2 * n].reshape(K, n, 2), theta=Y[:, 2 * n: 3 * n],
-                       vel=Y[:, 3 * n: 5 * n].reshape(K, n, 2), omega=Y[:, 5 * n: 6 * n], energy_media=q.media,
+    return Observation(times=times, pos=v.pos, theta=v.theta, vel=v.vel, omega=v.spin, energy_media=q.media,
                        energy_solid=ek + ep, energy_solid_kinetic=ek, energy_solid_potential=ep, dissipated_viscous=dv,
                        dissipated_friction=df, input_work=w, ledger=ledger,
                        force_normal=np.einsum("kij,ij->ki", F, normals), force_tangential=np.einsum("kij,ij->ki", F, tangents),

@@ -15,14 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse.linalg import splu
 
-from ..granular.system import GranularState, GranularSystem, Stepper
-from ..solid.base import SolidModel
+from ..granular.bundles import state_views
+from ..granular.system import Stepper
 from ..solid.newmark import Newmark, NewmarkState
 from . import core
 from .frame import contact_frame, contact_normals
-from .observation import Observation, observe_outputs
+from .observation import Observation, OutputStates, observe_outputs
 from .protocol import Reached, SolverError, StepSink
-from .settings import SolverSettings
 
 
 @dataclass
@@ -34,10 +33,12 @@ class StepOperators:
 
 
 class SparseSolver:
-    """The coupled step with sparse Newmark, one output per `advance`."""
+    """The coupled step with sparse Newmark, one output per `advance`; built from the run's coupled
+    problem (`granel.problem.Problem`)."""
 
-    def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
-                 outputs_every: int, preload=None):
+    def __init__(self, problem):
+        system, state0, model, settings = problem.system, problem.state, problem.solid, problem.settings
+        outputs_every, preload = problem.schedule.per, problem.solid_force0
         self.system, self.model, self.settings = system, model, settings
         self.name = f"{settings.method}-sparse"
         self.modes = None  # the solid is stepped in its nodal coordinates
@@ -138,7 +139,7 @@ class SparseSolver:
             clock["ticks"] += 2 ** (H - level)
             clock["level"] = level
             steps.log_steps([self.t], [ops.h], [its], lam[None, :])
-            self.stepper.maybe_refresh(st.y[: 2 * self.system.n].reshape(-1, 2))
+            self.stepper.maybe_refresh(state_views(st.y, self.system.n).pos)
         return Reached(1)
 
     # ------------------------------------------------------------ what the driver records
@@ -146,8 +147,8 @@ class SparseSolver:
         nc = len(self.frame.tangent)
         su = (self.B @ self.sol.x).reshape(1, nc, 2)
         energy = np.array([self.model.energy(self.sol.x, self.sol.v)], float)
-        return observe_outputs([self.t], self.st.y[None], su, energy, self.st.F[None], self.system, self.stepper.model,
-                               self.normals, self.frame.tangent)
+        states = OutputStates(times=[self.t], y=self.st.y[None], su=su, solid_energy=energy, F=self.st.F[None])
+        return observe_outputs(states, self.system, self.stepper.model, self.normals, self.frame.tangent)
 
     def solid_states(self, rows) -> dict:
         return {"q": self.sol.x[None].astype(np.float32), "v": self.sol.v[None].astype(np.float32)}

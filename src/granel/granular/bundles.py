@@ -1,13 +1,14 @@
 """Typed bundles of the arrays the compiled kernels read (numba accepts these NamedTuples as one
-argument each, and caches the compiled code).
+argument each, and caches the compiled code), and the granular state's layout.
 
-The granular state y (n granules, float64) is laid out once, here:
+The granular state y (n granules, float64) is laid out once, here, and read through the offsets
+(compiled code) or `state_views` (Python):
     y[0:2n]     centre positions, interleaved (x0, y0, x1, y1, ...)
-    y[2n:3n]    rotations theta
-    y[3n:5n]    velocities, interleaved
-    y[5n:6n]    spins omega
+    y[2n:3n]    rotations theta                              (`theta_offset`)
+    y[3n:5n]    velocities, interleaved                      (`velocity_offset`)
+    y[5n:6n]    spins omega                                  (`spin_offset`)
     y[6n:6n+3]  accumulated viscous dissipation, friction dissipation and input work, so that RK4
-                integrates the energy balance (13) at its own order.
+                integrates the energy balance (13) at its own order (`ledger_offset` + ACC_*).
 """
 
 from __future__ import annotations
@@ -19,10 +20,52 @@ import numpy as np
 from ..guard.jit import njit
 
 ACC_VISC, ACC_FRIC, ACC_WORK = 0, 1, 2
+LEDGER_SIZE = 3  # the accumulators
 
 
 def state_size(n: int) -> int:
-    return 6 * n + 3
+    return 6 * n + LEDGER_SIZE
+
+
+@njit(cache=True, inline="always")
+def theta_offset(n):
+    return 2 * n
+
+
+@njit(cache=True, inline="always")
+def velocity_offset(n):
+    return 3 * n
+
+
+@njit(cache=True, inline="always")
+def spin_offset(n):
+    return 5 * n
+
+
+@njit(cache=True, inline="always")
+def ledger_offset(n):
+    return 6 * n
+
+
+class StateViews(NamedTuple):
+    """Named views of granular states y (..., 6n+3): positions and velocities (..., n, 2),
+    rotations and spins (..., n), and the ledger's accumulators (...) of eq. (13)."""
+
+    pos: np.ndarray
+    theta: np.ndarray
+    vel: np.ndarray
+    spin: np.ndarray
+    dissipated_viscous: np.ndarray
+    dissipated_friction: np.ndarray
+    input_work: np.ndarray
+
+
+def state_views(y: np.ndarray, n: int) -> StateViews:
+    """`StateViews` of y (one state, or states along the leading axes); writing a view writes y."""
+    lead = y.shape[:-1]
+    acc = 6 * n
+    return StateViews(y[..., : 2 * n].reshape(*lead, n, 2), y[..., 2 * n: 3 * n], y[..., 3 * n: 5 * n].reshape(*lead, n, 2),
+                      y[..., 5 * n: 6 * n], y[..., acc + ACC_VISC], y[..., acc + ACC_FRIC], y[..., acc + ACC_WORK])
 
 
 class Granules(NamedTuple):

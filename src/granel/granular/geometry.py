@@ -1,18 +1,9 @@
-"""Initial overlaps of a built granular system, whatever built it (a hexagonal packing, a chain,
-a granule table, extra walls), by one rule:
-
-- two granules never start pressed into each other (a precompressed start is
-  `simulation.equilibrate`'s business);
-- a granule may start pressed into a rigid wall or the solid's face where a contact law acts
-  there, within the law's range (`range_share` of its radius, the run's overlap limit): a preload
-  placed at its equilibrium;
-- a granule never overlaps the solid where no contact acts (its ends, its inside, a granule that
-  is not one of the face's contacts), nor a wall beyond the law's range.
-
-The depth of each overlap follows the contact laws' own geometry: a pair's R_i + R_j - d (eq. 2),
-a wall's R - (x - p0).n for a centre that projects onto the segment (`kernels.wall_overlap`), and
-the solid's R minus the distance from the centre to its rectangle. A depth up to ROUND_OFF of the
-radius is touching, not overlapping."""
+"""Initial overlaps of a built granular system, whatever built it, by one rule: no two granules
+start pressed into each other; a granule may start pressed into a wall or the solid's face where a
+contact law acts there, by up to `range_share` of its radius; nowhere else. Depths [m] are the
+contact laws' own (eq. 2 for a pair, `kernels.wall_overlap` for a wall); one up to ROUND_OFF of
+the radius is touching. `initial_overlaps` returns the deepest refused one of each kind.
+docs/model.md ("Initial overlaps") gives the rule in full."""
 
 from __future__ import annotations
 

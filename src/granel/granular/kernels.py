@@ -17,8 +17,8 @@ import math
 import numpy as np
 
 from ..guard.jit import njit
-from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK
-from .contact import contact_law, contact_law_derivatives, hertz_potential
+from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, LEDGER_SIZE, ledger_offset, spin_offset, theta_offset, velocity_offset
+from .contact import contact_law, contact_law_derivatives, hertz_force, hertz_potential
 from .laws import load_force, wall_motion
 
 
@@ -78,7 +78,7 @@ def one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
     """The force (fx, fy) and torque on granule i from a flat partner (wall or solid point) along
     n_ik = (nx, ny), given its velocity relative to the partner (rvx, rvy), eqs. (2)-(6), and the
     (viscous, friction) power they dissipate."""
-    OM = 5 * radius.shape[0]
+    OM = spin_offset(radius.shape[0])
     tx = -ny
     ty = nx
     Ri = radius[i]
@@ -95,7 +95,7 @@ def wall_contact(y, model, c, t):
     overlap grows by the wall's displacement s, the granule's velocity is taken relative to the
     wall's, s' n). The one law of `rhs` and `wall_forces`."""
     walls, radius = model.walls, model.granules.radius
-    V = 3 * radius.shape[0]
+    V = velocity_offset(radius.shape[0])
     i = walls.g[c]
     w = walls.w[c]
     sw = vw = 0.0
@@ -113,11 +113,11 @@ def wall_contact(y, model, c, t):
 @njit(cache=True, inline="always")
 def _one_sided(dy, y, radius, i, nx, ny, delta, rvx, rvy, A, G, law):
     """`one_sided_force` added to granule i's derivative; returns the (viscous, friction) power."""
-    V = 3 * radius.shape[0]
+    V = velocity_offset(radius.shape[0])
     fx, fy, tq, pv, pf = one_sided_force(y, radius, i, nx, ny, delta, rvx, rvy, A, G, law)
     dy[V + 2 * i] += fx
     dy[V + 2 * i + 1] += fy
-    dy[5 * radius.shape[0] + i] += tq
+    dy[spin_offset(radius.shape[0]) + i] += tq
     return pv, pf
 
 
@@ -135,10 +135,10 @@ def rhs(t, y, dy, model, motion, tau):
     gr = model.granules
     radius = gr.radius
     n = radius.shape[0]
-    TH = 2 * n
-    V = 3 * n
-    OM = 5 * n
-    for k in range(6 * n + 3):
+    TH = theta_offset(n)
+    V = velocity_offset(n)
+    OM = spin_offset(n)
+    for k in range(ledger_offset(n) + LEDGER_SIZE):
         dy[k] = 0.0
     for i in range(n):
         dy[2 * i] = y[V + 2 * i]
@@ -212,9 +212,10 @@ def rhs(t, y, dy, model, motion, tau):
         dy[V + 2 * i] /= gr.mass[i]
         dy[V + 2 * i + 1] /= gr.mass[i]
         dy[OM + i] /= gr.inertia[i]
-    dy[6 * n + ACC_VISC] = p_visc
-    dy[6 * n + ACC_FRIC] = p_fric
-    dy[6 * n + ACC_WORK] = p_in
+    acc = ledger_offset(n)
+    dy[acc + ACC_VISC] = p_visc
+    dy[acc + ACC_FRIC] = p_fric
+    dy[acc + ACC_WORK] = p_in
 
 
 # ---------------------------------------------------------------- RK4
@@ -265,11 +266,21 @@ def overlaps(y, model, su):
     return dp, dw, ds
 
 
+# classical RK4 is stable for a decay rate r with r h below 2.785 (its real-axis limit)
+RK4_REAL_LIMIT = 2.785
+# a step's sub-steps keep rate h below this, inside RK4_REAL_LIMIT
+SUBSTEP_RATE_STEP = 2.0
+# the friction's rate at a step's start, times this margin, stands for its largest within the
+# step (the contact forces may grow over it)
+FRICTION_MARGIN = 1.5
+
+
 @njit(cache=True)
 def friction_rate(y, model, motion):
     """The largest decay rate of relative sliding in the tanh law's viscous regime,
-    mu k_s |N| / m_eff with 1/m_eff = sum 1/m + R^2/I over the bodies in contact [1/s] (eq. 5);
-    RK4 on that mode is stable for rate * h < 2.78. The solid points sit at the step's start."""
+    mu k_s |N| / m_eff with 1/m_eff = sum 1/m + R^2/I over the bodies in contact [1/s] (eq. 5),
+    times FRICTION_MARGIN: the rate the RK4 sub-steps must follow (`friction_substeps`). The
+    solid points sit at the step's start."""
     gr = model.granules
     radius, mass, inertia = gr.radius, gr.mass, gr.inertia
     muk = model.law.mu * model.law.k_s
@@ -279,22 +290,29 @@ def friction_rate(y, model, motion):
     for c in range(dp.shape[0]):
         if dp[c] > 0.0:
             inv = one[model.pairs.i[c]] + one[model.pairs.j[c]]
-            rate = max(rate, muk * model.pairs.A[c] * dp[c] * math.sqrt(dp[c]) * inv)
+            rate = max(rate, muk * hertz_force(model.pairs.A[c], dp[c]) * inv)
     for c in range(dw.shape[0]):
         if dw[c] > 0.0:
-            rate = max(rate, muk * model.walls.A[c] * dw[c] * math.sqrt(dw[c]) * one[model.walls.g[c]])
+            rate = max(rate, muk * hertz_force(model.walls.A[c], dw[c]) * one[model.walls.g[c]])
     for c in range(ds.shape[0]):
         if ds[c] > 0.0:
-            rate = max(rate, muk * model.points.A[c] * ds[c] * math.sqrt(ds[c]) * one[model.points.g[c]])
-    return rate
+            rate = max(rate, muk * hertz_force(model.points.A[c], ds[c]) * one[model.points.g[c]])
+    return FRICTION_MARGIN * rate
+
+
+@njit(cache=True, inline="always")
+def friction_substeps(rate, h):
+    """The RK4 sub-steps of a step h under the friction's `rate`: ceil(rate h / SUBSTEP_RATE_STEP),
+    at least 1."""
+    return max(1, int(math.ceil(rate * h / SUBSTEP_RATE_STEP)))
 
 
 @njit(cache=True)
 def rk4_substepped(y, t, h, model, motion, rate, work):
-    """One step of size h as m RK4 sub-steps, m = ceil(rate h / 2) (1 unless the friction is
+    """One step of size h as m RK4 sub-steps, m = `friction_substeps` (1 unless the friction is
     stiff), with the contact points' motion (A3) carried across the sub-steps. Returns m, or -1
     if the state stopped being finite."""
-    m = max(1, int(math.ceil(rate * h / 2.0)))
+    m = friction_substeps(rate, h)
     s = h / m
     for k in range(m):
         # a typed flag, not a literal: one compiled signature of rk4_step
@@ -314,7 +332,7 @@ def rk4_advance(y, t, h, nsteps, model, motion, ref_pos, max_disp, substep):
     work = np.empty((5, y.shape[0]))
     lim2 = max_disp * max_disp
     for s in range(nsteps):
-        rate = 1.5 * friction_rate(y, model, motion) if substep else 0.0
+        rate = friction_rate(y, model, motion) if substep else 0.0
         if rk4_substepped(y, t + s * h, h, model, motion, rate, work) < 0:
             return -(s + 1) - 1
         if moved_beyond(y, n, ref_pos, lim2):
@@ -343,8 +361,8 @@ def granule_energies(y, model, su):
     contact points displaced by su (nc, 2)."""
     gr = model.granules
     n = gr.radius.shape[0]
-    V = 3 * n
-    OM = 5 * n
+    V = velocity_offset(n)
+    OM = spin_offset(n)
     kin = np.empty(n)
     rot = np.empty(n)
     pot = np.zeros(n)
@@ -390,9 +408,9 @@ def point_kinematics(y, model, c, ux, uy, wx, wy):
     nx, ny = points.n[c, 0], points.n[c, 1]
     tx, ty = -ny, nx
     delta = point_overlap(y, i, c, radius, points, ux, uy)
-    rvx = y[3 * n + 2 * i] - wx
-    rvy = y[3 * n + 2 * i + 1] - wy
-    return i, delta, nx, ny, tx, ty, rvx, rvy, rvx * tx + rvy * ty + radius[i] * y[5 * n + i]
+    rvx = y[velocity_offset(n) + 2 * i] - wx
+    rvy = y[velocity_offset(n) + 2 * i + 1] - wy
+    return i, delta, nx, ny, tx, ty, rvx, rvy, rvx * tx + rvy * ty + radius[i] * y[spin_offset(n) + i]
 
 
 @njit(cache=True)

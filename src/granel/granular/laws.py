@@ -1,24 +1,14 @@
 """The laws of the applied loads and of a shaker wall's motion, compiled once: the integrator
-evaluates them at every RK4 stage, and `granular.loads` (`LoadHistory`, `WallDrive`) calls the
-same functions from Python. The histories' parameters are laid out as `granular.loads` builds
-them (the kind codes and LOAD_PARAMS below)."""
+evaluates them at every RK4 stage, and `granular.loads` (its history classes, `WallDrive`) calls
+the same functions from Python. `load_force` unpacks each kind's parameters by name, in the
+layout of its class's `params` (`granular.loads`)."""
 
 from __future__ import annotations
 
 import math
 
 from ..guard.jit import njit
-
-# how a load history is handed to `load_force`: a kind code and up to LOAD_PARAMS parameters
-KIND_HALF_SINE = 0
-KIND_BURST = 1
-KIND_TABLE = 2
-KIND_CONSTANT = 3
-KIND_HARMONIC = 4
-KIND_CHIRP = 5
-KIND_CODES = {"half_sine": KIND_HALF_SINE, "burst": KIND_BURST, "table": KIND_TABLE, "constant": KIND_CONSTANT,
-              "harmonic": KIND_HARMONIC, "chirp": KIND_CHIRP}
-LOAD_PARAMS = 8  # parameter slots per load
+from .load_codes import KIND_BURST, KIND_CHIRP, KIND_HALF_SINE, KIND_HARMONIC, KIND_TABLE, LOAD_PARAMS  # noqa: F401
 
 
 @njit(cache=True, inline="always")
@@ -42,46 +32,68 @@ def chirp_phase(s, f0, f1, duration, geometric):
 
 
 @njit(cache=True, inline="always")
-def load_force(kind, par, tab_t, tab_v, t):
-    """F(t) [N] of one load history: half-sine (fmax, tau, t0), burst (amp, f, t0, cycles), table
-    (linear through tab_t, tab_v, zero outside), constant (F), harmonic (amp, f, t0, duration,
-    phase, ramp cycles) or chirp (amp, f0, t0, duration, f1, ramp cycles, geometric)."""
-    if kind == KIND_HALF_SINE:
-        s = t - par[2]
-        if s < 0.0 or s > par[1]:
-            return 0.0
-        return par[0] * math.sin(math.pi * s / par[1])
-    if kind == KIND_BURST:
-        s = t - par[2]
-        if s < 0.0 or s > par[3] / par[1]:
-            return 0.0
-        return par[0] * math.sin(2.0 * math.pi * par[1] * s)
-    if kind == KIND_TABLE:
-        lo = 0
-        hi = tab_t.shape[0] - 1
-        if hi < lo or t < tab_t[lo] or t > tab_t[hi]:
-            return 0.0
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if tab_t[mid] <= t:
-                lo = mid
-            else:
-                hi = mid
-        if hi == lo:
-            return tab_v[lo]
-        w = (t - tab_t[lo]) / (tab_t[hi] - tab_t[lo])
-        return tab_v[lo] * (1.0 - w) + tab_v[hi] * w
-    if kind == KIND_HARMONIC or kind == KIND_CHIRP:
-        s = t - par[2]
-        if s < 0.0 or s > par[3]:
-            return 0.0
-        f = par[1]
-        if kind == KIND_HARMONIC:
-            phase = 2.0 * math.pi * f * s + par[4]
+def half_sine_force(t, fmax, tau, t0):
+    """`loads.HalfSine`: fmax sin(pi (t - t0) / tau) over [t0, t0 + tau], else 0."""
+    s = t - t0
+    if s < 0.0 or s > tau:
+        return 0.0
+    return fmax * math.sin(math.pi * s / tau)
+
+
+@njit(cache=True, inline="always")
+def burst_force(t, amplitude, frequency, t0, cycles):
+    """`loads.Burst`: amplitude sin(2 pi f (t - t0)) for `cycles` periods from t0."""
+    s = t - t0
+    if s < 0.0 or s > cycles / frequency:
+        return 0.0
+    return amplitude * math.sin(2.0 * math.pi * frequency * s)
+
+
+@njit(cache=True, inline="always")
+def table_force(t, tab_t, tab_v):
+    """`loads.Table`: linear through (tab_t, tab_v), zero outside."""
+    lo = 0
+    hi = tab_t.shape[0] - 1
+    if hi < lo or t < tab_t[lo] or t > tab_t[hi]:
+        return 0.0
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab_t[mid] <= t:
+            lo = mid
         else:
-            phase = chirp_phase(s, f, par[4], par[3], par[6] > 0.5)
-        return par[0] * ramp(s, par[5] / f, par[3]) * math.sin(phase)
-    return par[0]
+            hi = mid
+    if hi == lo:
+        return tab_v[lo]
+    w = (t - tab_t[lo]) / (tab_t[hi] - tab_t[lo])
+    return tab_v[lo] * (1.0 - w) + tab_v[hi] * w
+
+
+@njit(cache=True, inline="always")
+def drive_force(t, amplitude, frequency, t0, duration, ramp_cycles, phase_of_s):
+    """`loads.Harmonic` and `loads.Chirp`: amplitude r(s) sin(phase(s)), s = t - t0, over
+    [0, duration], r the ramp of `ramp_cycles` periods at `frequency` (the start frequency)."""
+    s = t - t0
+    if s < 0.0 or s > duration:
+        return 0.0
+    return amplitude * ramp(s, ramp_cycles / frequency, duration) * math.sin(phase_of_s)
+
+
+@njit(cache=True, inline="always")
+def load_force(kind, par, tab_t, tab_v, t):
+    """F(t) [N] of one load history from its kind code and parameters (`granular.loads`)."""
+    if kind == KIND_HALF_SINE:
+        return half_sine_force(t, par[0], par[1], par[2])
+    if kind == KIND_BURST:
+        return burst_force(t, par[0], par[1], par[2], par[3])
+    if kind == KIND_TABLE:
+        return table_force(t, tab_t, tab_v)
+    if kind == KIND_HARMONIC:
+        amplitude, frequency, t0, duration, phase, ramp_cycles = par[0], par[1], par[2], par[3], par[4], par[5]
+        return drive_force(t, amplitude, frequency, t0, duration, ramp_cycles, 2.0 * math.pi * frequency * (t - t0) + phase)
+    if kind == KIND_CHIRP:
+        amplitude, f0, t0, duration, f1, ramp_cycles, geometric = par[0], par[1], par[2], par[3], par[4], par[5], par[6]
+        return drive_force(t, amplitude, f0, t0, duration, ramp_cycles, chirp_phase(t - t0, f0, f1, duration, geometric > 0.5))
+    return par[0]  # KIND_CONSTANT: the value
 
 
 @njit(cache=True, inline="always")

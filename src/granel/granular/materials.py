@@ -6,18 +6,11 @@ numbers or numpy arrays alike."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class Material:
-    """An isotropic linear elastic material."""
-
-    E: float  # Young's modulus [Pa]
-    rho: float  # density [kg/m^3]
-    nu: float  # Poisson's ratio [-]
+from ..solid.base import Material  # noqa: F401  (the one material record, here for the granules)
 
 
 STEEL = Material(E=200e9, rho=7850.0, nu=0.3)
@@ -64,38 +57,37 @@ def hertz_coefficient(E_star, R_star):
     return 4.0 / 3.0 * E_star * np.sqrt(R_star)
 
 
-def static_overlap(force: float, A: float) -> float:
-    """The overlap at which a Hertz contact carries `force` (eq. 2): A delta^(3/2) = F."""
-    return (force / A) ** (2.0 / 3.0)
-
-
-def impact_overlap(m_star: float, speed: float, A: float) -> float:
-    """The largest overlap of an undamped Hertz impact (eq. 2) at closing speed v:
-    1/2 m* v^2 = 2/5 A delta^(5/2), so delta = (5 m* v^2 / (4 A))^(2/5)."""
-    return (5.0 * m_star * speed * speed / (4.0 * A)) ** 0.4
-
-
 def damping_coefficient(alpha_n, m_star, A):
     """alpha_n sqrt(m* A): gamma = this * delta^(1/4), eq. (3)."""
     return alpha_n * np.sqrt(m_star * A)
 
 
-def pair_coefficients(E1, nu1, R1, m1, E2, nu2, R2, m2, alpha_n):
+class Body(NamedTuple):
+    """A granule as a contact sees it: Young's modulus E [Pa], Poisson's ratio nu, radius R [m]
+    and mass m [kg]; numbers, or arrays of one per contact (`GranularSystem.bodies`)."""
+
+    E: object
+    nu: object
+    R: object
+    m: object
+
+
+def pair_coefficients(a: Body, b: Body, alpha_n):
     """(A, G) of eq. (3) for two granules, with E*, R* and m* of eq. (4)."""
-    A = hertz_coefficient(effective_modulus(E1, nu1, E2, nu2), effective_radius(R1, R2))
-    return A, damping_coefficient(alpha_n, effective_mass(m1, m2), A)
+    A = hertz_coefficient(effective_modulus(a.E, a.nu, b.E, b.nu), effective_radius(a.R, b.R))
+    return A, damping_coefficient(alpha_n, effective_mass(a.m, b.m), A)
 
 
-def wall_coefficients(E, nu, R, m, alpha_n, damped=True):
+def wall_coefficients(g: Body, alpha_n, damped=True):
     """(A, G) of eq. (3) for a granule on a rigid, immovable wall: E* = E / (1 - nu^2), R* = R,
     and in the dashpot m* = m for a damped wall, m* = 0 (G = 0, Hertz alone) for an undamped
     (elastic) one; `damped` is a bool or an array of them, one per granule."""
-    A = hertz_coefficient(effective_modulus(E, nu), effective_radius(R))
-    m_star = effective_mass(m, None) if np.all(damped) else np.where(damped, effective_mass(m, None), 0.0)
+    A = hertz_coefficient(effective_modulus(g.E, g.nu), effective_radius(g.R))
+    m_star = effective_mass(g.m, None) if np.all(damped) else np.where(damped, effective_mass(g.m, None), 0.0)
     return A, damping_coefficient(alpha_n, m_star, A)
 
 
-def point_coefficient(E, nu, R):
+def point_coefficient(g: Body):
     """A of eq. (3) for a granule on the solid's massless rigid layer: E* = E / (1 - nu^2), R* =
     R, and m* = 0, so no damping (G = 0)."""
-    return hertz_coefficient(effective_modulus(E, nu), effective_radius(R))
+    return hertz_coefficient(effective_modulus(g.E, g.nu), effective_radius(g.R))

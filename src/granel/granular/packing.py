@@ -35,6 +35,20 @@ class Wall:
     damped: bool = True  # False: no dashpot at its contacts (an elastic wall)
 
 
+@dataclass(frozen=True)
+class Placement:
+    """Where a built medium lies: the side of the solid it sits on (left, right or none), its face
+    line (x = face; y = face for a medium growing up or down), the centre of its first column along
+    that line, the gap between the face and the first granules, and the direction it grows (None:
+    away from the solid, along `side`)."""
+
+    side: str
+    face: float
+    center: float
+    gap: float = 0.0
+    grow: str | None = None
+
+
 @dataclass
 class Medium:
     """One granular medium: granule centres, radii, labels, material and its walls."""
@@ -161,28 +175,18 @@ def hexagonal_columns(
     columns: list[int],
     radius: float,
     material: Material,
-    side: str,
-    face: float,
-    center: float,
+    at: Placement,
     labels: str | list[str] = "numeric",
     walls: tuple[str, ...] = ("bottom", "top"),
-    gap: float = 0.0,
-    grow: str | None = None,
 ) -> Medium:
-    """Hexagonally packed, initially touching columns parallel to a face line.
-
-    The medium grows from the face along `grow` (left, right: the face is the line x = face and the
-    columns are vertical; up, down: the face is y = face and the "columns" are rows); a medium beside
-    the solid grows away from it (`grow` = `side`). With u along the growth and s along the face,
-    column c (0 nearest the face) holds columns[c] granules at u = R + gap + c R sqrt(3), shifted by
-    R along s when c is odd; column 0 is centred on `center`.
-
-    `walls` names the rigid walls that close it: the two channel walls at the ends of column 0
-    (bottom and top, or left and right for up/down growth), `outer` beyond the last column and
-    `face` on the face line (only for a medium not beside a solid). Labels run from the outermost
-    column inward, then along +s, as in the paper (1..14 and A..N). Touching bodies clear one
-    another by `CLEARANCE` ulps, so an unloaded medium feels no force."""
-    grow = side if grow is None else grow
+    """Hexagonally packed, initially touching columns (clear by `CLEARANCE` ulps) parallel to a
+    face line, placed `at` (column 0 nearest the face, centred on `at.center`). `walls` names the
+    rigid walls that close it (the two channel walls, `outer`, `face`); labels run from the
+    outermost column inward, as in the paper (1..14 and A..N). Returns the Medium (lengths in m);
+    raises ValueError for a placement, column count, wall or labels it cannot build. docs/model.md
+    ("Building the media") gives the layout."""
+    side, face, center, gap = at.side, at.face, at.center, at.gap
+    grow = side if at.grow is None else at.grow
     if side not in ("left", "right", "none"):
         raise ValueError(f"side must be 'left', 'right' or 'none', got {side!r}")
     if grow not in GROWTHS:
@@ -243,26 +247,18 @@ def hexagonal_columns(
         return pos, rad, out, close_pairs(pos, 2 * R * (1 + 1e-9)), face_ok
 
     pos, out = _spaced(layout, name)
-    return Medium(name, lab, pos, np.full(n, R), material, side, out, contact)
+    return Medium(name=name, labels=lab, pos=pos, radius=np.full(n, R), material=material, side=side, walls=out,
+                  contact_granules=contact)
 
 
-def chain(
-    name: str,
-    radii: list[float],
-    materials: list[Material],
-    side: str,
-    face: float,
-    center: float,
-    walls: tuple[str, ...] = (),
-    gap: float = 0.0,
-    grow: str | None = None,
-) -> Medium:
+def chain(name: str, radii: list[float], materials: list[Material], at: Placement, walls: tuple[str, ...] = ()) -> Medium:
     """A straight chain of touching beads, radii[0] nearest the face, grown from the face line
-    along `grow` (as `hexagonal_columns`; centred on `center` along the face), each bead of its
+    along `at.grow` (as `hexagonal_columns`; centred on `at.center` along the face), each bead of its
     own material. Labels 1..n run from the far end to the face, as a column's do: label 1 is the
     outermost bead. `walls`: `face` (on the face line, only away from a solid) and `outer`
     (touching the last bead). Touching beads and walls clear by a few ulps (`CLEARANCE`)."""
-    grow = side if grow is None else grow
+    side, face, center, gap = at.side, at.face, at.center, at.gap
+    grow = side if at.grow is None else at.grow
     if grow not in GROWTHS:
         raise ValueError(f"grow must be one of {list(GROWTHS)}, got {grow!r}")
     if side != "none" and grow != side:
@@ -310,7 +306,8 @@ def chain(
         return pos, rad, out, links, face_ok
 
     pos, out = _spaced(layout, name)
-    return Medium(name, numeric_labels(n), pos, rad, mats[0], side, out, [n - 1], mats)
+    return Medium(name=name, labels=numeric_labels(n), pos=pos, radius=rad, material=mats[0], side=side, walls=out,
+                  contact_granules=[n - 1], granule_materials=mats)
 
 
 def medium_from_table(name: str, rows: list[dict], material: Material, side: str = "none",
@@ -328,7 +325,8 @@ def medium_from_table(name: str, rows: list[dict], material: Material, side: str
             if key and (materials is None or key not in materials):
                 raise ValueError(f"granule {r['label']}: unknown material {key!r}; defined: {sorted(materials or {})}")
             per.append(materials[key] if key else material)
-    return Medium(name, lab, pos, rad, material, side, [], [], per)
+    return Medium(name=name, labels=lab, pos=pos, radius=rad, material=material, side=side, walls=[],
+                  contact_granules=[], granule_materials=per)
 
 
 def read_granules_csv(path) -> list[dict]:

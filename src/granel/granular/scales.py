@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from .materials import impact_overlap, pair_coefficients, static_overlap, wall_coefficients
+from .contact import hertz_overlap, hertz_stiffness, impact_overlap
+from .materials import pair_coefficients, wall_coefficients
 from .system import GranularState, GranularSystem
 
 # a Hertz impact lasts HERTZ_DURATION delta_max / v: 2 (2/5) B(2/5, 1/2)
@@ -33,9 +34,9 @@ def load_scales(system: GranularSystem, state: GranularState, duration: float = 
         if not (np.isfinite(v) and v > 0):
             continue
         energy = 0.5 * m * v * v
-        if h.kind in ("harmonic", "chirp") and duration > 0:
-            driving = max(0.0, min(h.params[3], duration - h.params[2]))
-            energy = max(energy, 0.5 * abs(h.params[0]) * v * driving)
+        driving = h.driving_time(duration) if duration > 0 else 0.0
+        if driving > 0:
+            energy = max(energy, 0.5 * h.peak() * v * driving)
         scales.append((v, energy))
     for w in system.walls:  # a shaker: the speed it gives a granule, and that granule's energy then
         if w.drive is not None and system.n:
@@ -52,14 +53,14 @@ def load_scales(system: GranularSystem, state: GranularState, duration: float = 
 
 def collision_time(m_star, speed, A):
     """The duration of an undamped Hertz impact at closing speed v (eq. 2): HERTZ_DURATION
-    delta_max / v, delta_max its largest overlap (`materials.impact_overlap`)."""
+    delta_max / v, delta_max its largest overlap (`contact.impact_overlap`)."""
     return HERTZ_DURATION * impact_overlap(m_star, speed, A) / speed
 
 
 def linear_frequency(m_star, A, delta) -> float:
     """The frequency [Hz] of small oscillations of a Hertz contact about the overlap delta (eq. 2):
-    sqrt(k / m*) / 2 pi, k = 3/2 A sqrt(delta)."""
-    return float(np.sqrt(1.5 * A * np.sqrt(delta) / m_star)) / (2 * np.pi)
+    sqrt(k / m*) / 2 pi, k = `contact.hertz_stiffness`."""
+    return float(np.sqrt(hertz_stiffness.py_func(A, delta) / m_star)) / (2 * np.pi)
 
 
 def contact_frequency(system: GranularSystem, v_ref: float) -> float:
@@ -86,10 +87,7 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
         J = e.history.peak_impulse()
         if math.isfinite(J) and J > 0:
             speed = max(speed, J / m)
-        if e.history.kind == "half_sine":
-            bounds.append(e.history.params[1] / 10.0)
-        elif e.history.top_frequency > 0:
-            bounds.append(1.0 / (e.history.top_frequency * 20.0))
+        bounds.append(e.history.step_bound())
     for w in system.walls:  # a shaker: its period, and the impacts at its speed
         if w.drive is not None:
             bounds.append(1.0 / (w.drive.frequency * 20.0))
@@ -97,14 +95,14 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
     if (speed > 0 or force > 0) and system.n:
         kinds = np.column_stack([system.radius, system.E, system.nu, system.mass])
         for g in np.unique(kinds, axis=0, return_index=True)[1]:
-            E, nu, R, m = system.E[g], system.nu[g], system.radius[g], system.mass[g]
-            pair = float(pair_coefficients(E, nu, R, m, E, nu, R, m, 0.0)[0]), m / 2
-            wall = float(wall_coefficients(E, nu, R, m, 0.0)[0]), m
+            body, m = system.bodies(g), system.mass[g]
+            pair = float(pair_coefficients(body, body, 0.0)[0]), m / 2
+            wall = float(wall_coefficients(body, 0.0)[0]), m
             for A, ms in (pair, wall):
                 if speed > 0:
                     bounds.append(collision_time(ms, speed, A) / 20.0)
                 if force > 0:  # a sustained load: the contact's period about the overlap it compresses to
-                    bounds.append(1.0 / linear_frequency(ms, A, static_overlap(force, A)) / 20.0)
+                    bounds.append(1.0 / linear_frequency(ms, A, hertz_overlap(force, A)) / 20.0)
     return min(bounds) if bounds else math.inf
 
 

@@ -12,12 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .laws import KIND_CODES, LOAD_PARAMS
-from .loads import LoadHistory
-from .materials import pair_coefficients, point_coefficient, sphere_inertia, sphere_mass, wall_coefficients
+from .loads import LOAD_PARAMS, LoadHistory
+from .materials import Body, pair_coefficients, point_coefficient, sphere_inertia, sphere_mass, wall_coefficients
 from . import kernels
-from .bundles import ACC_FRIC, ACC_VISC, ACC_WORK, GranularModel, Granules, Law, Loads, Motion, Pairs, Points, Walls, \
-    state_size, still
+from .bundles import GranularModel, Granules, Law, Loads, Motion, Pairs, Points, StateViews, Walls, state_size, \
+    state_views, still
 from .neighbours import close_pairs
 from .packing import Medium, Wall
 
@@ -48,6 +47,11 @@ class Excitation:
     granule: int
     direction: tuple[float, float]
     history: LoadHistory
+    toward: int = 0  # the direction as given: +1 toward the solid, -1 away from it, 0 a vector
+
+
+# the unit vector toward the solid from a medium on each side of it
+MEDIUM_TOWARD_SOLID = {"left": (1.0, 0.0), "right": (-1.0, 0.0)}
 
 
 @dataclass
@@ -66,6 +70,8 @@ class GranularSystem:
     solid_contacts: list[SolidContact]
     excitations: list[Excitation]
     skin: float = 0.0
+    toward_solid: np.ndarray | None = None  # (n, 2) unit vectors toward the solid (NaN: a medium away from it)
+    strikers: tuple[int, ...] = ()  # the granules given an initial motion, in the scenario's order
     # derived: the bundles the kernels read
     wall_geometry: tuple = field(init=False)  # (p0, tangent, length, normal, medium index) per wall
     points: Points = field(init=False)
@@ -75,12 +81,14 @@ class GranularSystem:
         n = len(self.labels)
         if self.skin <= 0.0:
             self.skin = 0.1 * float(self.radius.min()) if n else 1e-3
+        if self.toward_solid is None:
+            self.toward_solid = np.full((n, 2), np.nan)
         self.wall_geometry = wall_geometry(self.walls, self.media)
         nc = len(self.solid_contacts)
         g = np.array([c.granule for c in self.solid_contacts], dtype=np.int64)
         nrm = np.array([c.normal for c in self.solid_contacts], float).reshape(nc, 2)
         nrm /= np.maximum(np.hypot(nrm[:, 0], nrm[:, 1]), 1e-300)[:, None]
-        A = np.asarray(point_coefficient(self.E[g], self.nu[g], self.radius[g]), float).reshape(nc)
+        A = np.asarray(point_coefficient(self.bodies(g)), float).reshape(nc)
         self.points = Points(g, np.array([c.point for c in self.solid_contacts], float).reshape(nc, 2), nrm, A, np.zeros(nc))
         self.loads = load_bundle(self.excitations)
 
@@ -95,6 +103,10 @@ class GranularSystem:
     @property
     def n(self) -> int:
         return len(self.labels)
+
+    def bodies(self, index) -> Body:
+        """The granules `index` (an index or an array of them) as contacts see them."""
+        return Body(self.E[index], self.nu[index], self.radius[index], self.mass[index])
 
     def index(self, label: str) -> int:
         try:
@@ -113,9 +125,10 @@ def build_system(
     excitations: list[Excitation] | None = None,
     extra_walls: list[Wall] | None = None,
 ) -> GranularSystem:
-    labels, mi, pos, rad, E, nu, rho, walls = [], [], [], [], [], [], [], []
+    labels, mi, pos, rad, E, nu, rho, walls, toward = [], [], [], [], [], [], [], [], []
     for k, m in enumerate(media):
         labels += [f"{m.name}:{lab}" for lab in m.labels]
+        toward += [MEDIUM_TOWARD_SOLID.get(m.side, (np.nan, np.nan))] * m.n
         mi += [k] * m.n
         pos.append(m.pos)
         rad.append(m.radius)
@@ -142,6 +155,7 @@ def build_system(
         walls=walls,
         solid_contacts=list(solid_contacts or []),
         excitations=list(excitations or []),
+        toward_solid=np.array(toward, float).reshape(-1, 2),
     )
 
 
@@ -157,42 +171,47 @@ class GranularState:
         return (len(self.y) - 3) // 6
 
     @property
+    def views(self) -> StateViews:
+        return state_views(self.y, self.n)
+
+    @property
     def pos(self) -> np.ndarray:
-        return self.y[: 2 * self.n].reshape(-1, 2)
+        return self.views.pos
 
     @property
     def theta(self) -> np.ndarray:
-        return self.y[2 * self.n : 3 * self.n]
+        return self.views.theta
 
     @property
     def vel(self) -> np.ndarray:
-        return self.y[3 * self.n : 5 * self.n].reshape(-1, 2)
+        return self.views.vel
 
     @property
     def omega(self) -> np.ndarray:
-        return self.y[5 * self.n : 6 * self.n]
+        return self.views.spin
 
     @property
     def dissipated_viscous(self) -> float:
-        return float(self.y[6 * self.n + ACC_VISC])
+        return float(self.views.dissipated_viscous)
 
     @property
     def dissipated_friction(self) -> float:
-        return float(self.y[6 * self.n + ACC_FRIC])
+        return float(self.views.dissipated_friction)
 
     @property
     def input_work(self) -> float:
-        return float(self.y[6 * self.n + ACC_WORK])
+        return float(self.views.input_work)
 
 
 def initial_state(system: GranularSystem, velocities=None, spins=None) -> GranularState:
     n = system.n
     y = np.zeros(state_size(n))
-    y[: 2 * n] = system.pos0.ravel()
+    v = state_views(y, n)
+    v.pos[:] = system.pos0
     if velocities is not None:
-        y[3 * n : 5 * n] = np.asarray(velocities, float).ravel()
+        v.vel[:] = np.asarray(velocities, float).reshape(n, 2)
     if spins is not None:
-        y[5 * n : 6 * n] = np.asarray(spins, float)
+        v.spin[:] = np.asarray(spins, float)
     return GranularState(y, 0.0)
 
 
@@ -228,7 +247,6 @@ class NeighbourList:
 
 def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
     """Pairs whose surfaces are closer than the skin (KD-tree), and granule-wall candidates."""
-    n = system.n
     R = system.radius
     skin = system.skin
     law = system.law
@@ -242,8 +260,7 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         i, j = i[order].astype(np.int64), j[order].astype(np.int64)
     else:
         i = j = np.zeros(0, dtype=np.int64)
-    E, nu, m = system.E, system.nu, system.mass
-    pA, pG = pair_coefficients(E[i], nu[i], R[i], m[i], E[j], nu[j], R[j], m[j], law.alpha_n)
+    pA, pG = pair_coefficients(system.bodies(i), system.bodies(j), law.alpha_n)
     p0, tan, length, nrm, medium, drive = system.wall_geometry
     wg, ww = [], []
     for k in range(len(length)):
@@ -259,13 +276,13 @@ def build_neighbours(system: GranularSystem, pos: np.ndarray) -> NeighbourList:
         ww += [k] * len(idx)
     wg = np.array(wg, dtype=np.int64)
     damped = np.array([w.damped for w in system.walls], bool)[np.array(ww, dtype=np.int64)]
-    wA, wG = wall_coefficients(E[wg], nu[wg], R[wg], m[wg], law.alpha_n, damped)
+    wA, wG = wall_coefficients(system.bodies(wg), law.alpha_n, damped)
     walls = Walls(wg, np.array(ww, dtype=np.int64), wA, wG, p0, tan, length, nrm, drive)
     return NeighbourList(pos.copy(), Pairs(i, j, pA, pG), walls)
 
 
 def load_bundle(excitations: list[Excitation]) -> Loads:
-    """The applied loads as compiled-kernel arrays (kinds in `laws.KIND_CODES`)."""
+    """The applied loads as compiled-kernel arrays (each history's `code` and `params`)."""
     ne = len(excitations)
     direction = np.zeros((ne, 2))
     kind = np.zeros(ne, dtype=np.int64)
@@ -275,7 +292,7 @@ def load_bundle(excitations: list[Excitation]) -> Loads:
     for k, e in enumerate(excitations):
         d = np.asarray(e.direction, float)
         direction[k] = d / np.hypot(*d)
-        kind[k] = KIND_CODES[e.history.kind]
+        kind[k] = e.history.code
         p = list(e.history.params)[:LOAD_PARAMS]
         params[k, : len(p)] = p
         tt.append(np.asarray(e.history.times, float))

@@ -19,9 +19,9 @@ import numpy as np
 from ..guard.fingerprints import sparse_digest
 from .results import RECORD_DIMS, ResultFileError, wall_names
 
-RECORD_VERSION = 1  # the `model_record` attribute: raise when the record's layout changes
+RECORD_VERSION = 2  # the `model_record` attribute: raise when the record's layout changes (2: directions, strikers)
 DRIVE_PARAMS = 6  # `granular.loads.WallDrive.params`: amplitude, frequency, t0, duration, phase, ramp cycles
-LOAD_PARAMS = 8  # `granular.laws.LOAD_PARAMS`: a load history's parameters, zero-padded
+LOAD_PARAMS = 8  # `granular.loads.LOAD_PARAMS`: a load history's parameters, zero-padded
 # record variables a result of an earlier granel may lack, read with their default (walls damped)
 OPTIONAL = ("wall_damped",)
 
@@ -56,7 +56,8 @@ class ContactRecord:
 @dataclass(frozen=True)
 class LoadRecord:
     """An applied load: its granule index, unit direction, history kind (`granular.loads`) with
-    its parameters (zero-padded to LOAD_PARAMS) and, for a table, its times and values."""
+    its parameters (zero-padded to LOAD_PARAMS), for a table its times and values, and how its
+    direction was given (+1 toward the solid, -1 away from it, 0 a vector)."""
 
     granule: int
     direction: tuple[float, float]
@@ -64,6 +65,7 @@ class LoadRecord:
     params: tuple[float, ...]
     times: tuple[float, ...] = ()
     values: tuple[float, ...] = ()
+    toward: int = 0
 
 
 @dataclass(frozen=True)
@@ -71,8 +73,9 @@ class ResultModel:
     """The granules (labels, media, built centres, radius, mass, moment of inertia, E, nu), the
     contact law of eqs. (2)-(5) and the neighbour skin, the walls, the solid contacts, and the
     solid: kind, reduced DOFs, recipe (JSON), digest of M and K, mesh nodes and elements (None for
-    a rigid solid) and the natural frequencies of the modal coordinates (the result's `mode_omega`;
-    None without)."""
+    a rigid solid), the natural frequencies of the modal coordinates (the result's `mode_omega`;
+    None without), the loads, each granule's unit vector toward the solid (NaN for a medium away
+    from it) and the granules given an initial motion (in the scenario's order)."""
 
     labels: tuple[str, ...]
     media: tuple[str, ...]
@@ -97,6 +100,8 @@ class ResultModel:
     elements: np.ndarray | None = None
     mode_omega: np.ndarray | None = None
     loads: tuple[LoadRecord, ...] = ()
+    toward_solid: np.ndarray | None = None
+    strikers: tuple[int, ...] = ()
 
     @property
     def n(self) -> int:
@@ -107,26 +112,31 @@ def model_record(system, solid) -> ResultModel:
     """The record of a run's `granular.system.GranularSystem` and `solid.base.SolidModel`."""
     if [c.name for c in system.solid_contacts] != [c.name for c in solid.contacts]:
         raise ValueError("the granular system's solid contacts and the solid's contact points differ")
-    walls = tuple(WallRecord(label, _pair(w.p0), _pair(w.p1), _pair(w.normal), w.medium,
-                             tuple(float(x) for x in w.drive.params()) if w.drive is not None
-                             else (0.0,) * DRIVE_PARAMS, bool(w.damped))
+    walls = tuple(WallRecord(name=label, p0=_pair(w.p0), p1=_pair(w.p1), normal=_pair(w.normal), medium=w.medium,
+                             drive=tuple(float(x) for x in w.drive.params()) if w.drive is not None
+                             else (0.0,) * DRIVE_PARAMS, damped=bool(w.damped))
                   for label, w in zip(wall_names(system), system.walls))
     contacts = tuple(ContactRecord(p.name, int(c.granule), _pair(c.point), _pair(c.normal), (p.dof_x, p.dof_y, p.dof_rotation))
                      for c, p in zip(system.solid_contacts, solid.contacts))
     recipe = solid.recipe.to_json() if getattr(solid, "recipe", None) is not None else ""
-    loads = tuple(LoadRecord(int(e.granule), _pair(np.asarray(e.direction, float) / np.hypot(*e.direction)), e.history.kind,
-                             tuple(float(x) for x in e.history.params) + (0.0,) * (LOAD_PARAMS - len(e.history.params)),
-                             tuple(float(x) for x in e.history.times), tuple(float(x) for x in e.history.values))
+    loads = tuple(LoadRecord(granule=int(e.granule),
+                             direction=_pair(np.asarray(e.direction, float) / np.hypot(*e.direction)),
+                             kind=e.history.kind,
+                             params=tuple(float(x) for x in e.history.params) + (0.0,) * (LOAD_PARAMS - len(e.history.params)),
+                             times=tuple(float(x) for x in e.history.times),
+                             values=tuple(float(x) for x in e.history.values), toward=int(e.toward))
                   for e in system.excitations)
     law = system.law
     return ResultModel(
-        tuple(system.labels), tuple(system.media), np.asarray(system.medium_index, np.int64),
-        np.asarray(system.pos0, float).reshape(-1, 2), *(np.asarray(a, float) for a in
-                                                         (system.radius, system.mass, system.inertia, system.E, system.nu)),
-        float(law.mu), float(law.alpha_n), float(law.k_s), float(system.skin), walls, contacts,
-        solid.kind, int(solid.ndof), recipe, sparse_digest((solid.M, solid.K)),
-        None if solid.nodes is None else np.asarray(solid.nodes, float),
-        None if solid.elements is None else np.asarray(solid.elements, np.int64), loads=loads)
+        labels=tuple(system.labels), media=tuple(system.media), medium_index=np.asarray(system.medium_index, np.int64),
+        position0=np.asarray(system.pos0, float).reshape(-1, 2), radius=np.asarray(system.radius, float),
+        mass=np.asarray(system.mass, float), inertia=np.asarray(system.inertia, float), E=np.asarray(system.E, float),
+        nu=np.asarray(system.nu, float), mu=float(law.mu), alpha_n=float(law.alpha_n), k_s=float(law.k_s),
+        skin=float(system.skin), walls=walls, contacts=contacts, solid_kind=solid.kind, solid_dofs=int(solid.ndof),
+        solid_recipe=recipe, solid_digest=sparse_digest((solid.M, solid.K)),
+        nodes=None if solid.nodes is None else np.asarray(solid.nodes, float),
+        elements=None if solid.elements is None else np.asarray(solid.elements, np.int64), loads=loads,
+        toward_solid=np.asarray(system.toward_solid, float).reshape(-1, 2), strikers=tuple(int(g) for g in system.strikers))
 
 
 def _pair(p) -> tuple[float, float]:
@@ -172,6 +182,11 @@ def record_entries(rec: ResultModel) -> tuple[dict, dict]:
         "load_table_size": (np.array([len(e.times) for e in rec.loads], np.int64), {"long_name": "points of its table"}),
         "load_table_time": (np.array([t for e in rec.loads for t in e.times], float), {"units": "s"}),
         "load_table_value": (np.array([v for e in rec.loads for v in e.values], float), {"units": "N"}),
+        "load_toward": (np.array([e.toward for e in rec.loads], np.int8),
+                        {"long_name": "the direction as given: 1 toward the solid, -1 away from it, 0 a vector"}),
+        "granule_toward_solid": (np.asarray(rec.toward_solid, float).reshape(rec.n, 2),
+                                 {"long_name": "unit vector toward the solid (NaN: a medium away from it)"}),
+        "striker_granule": (np.array(rec.strikers, np.int64), {"long_name": "granules given an initial motion"}),
     })
     if rec.nodes is not None:
         values["solid_node_position"] = (rec.nodes, {"units": "m"})
@@ -186,7 +201,12 @@ def record_entries(rec: ResultModel) -> tuple[dict, dict]:
 
 
 def has_record(ds) -> bool:
-    return "model_record" in ds.attrs
+    """Whether `ds` carries a model record of this granel's layout (an older one is rebuilt from
+    its scenario by `run.with_model_record`, like a result without one)."""
+    return "model_record" in ds.attrs and str(ds.attrs["model_record"]) not in OLDER_RECORDS
+
+
+OLDER_RECORDS = ("1",)  # record versions of earlier granels, which lack fields this one reads
 
 
 def with_record(ds, rec: ResultModel):
@@ -203,7 +223,7 @@ def read_record(ds, name="result") -> ResultModel:
     def bad(why):
         return ResultFileError(f"{name}: damaged result (its model record: {why})", 2)
 
-    if not has_record(ds):
+    if "model_record" not in ds.attrs or str(ds.attrs["model_record"]) in OLDER_RECORDS:
         raise ResultFileError(f"{name}: no model record (a result of granel before it stored its model); read it with "
                               "granel.run.load_result, which builds the record from its scenario", 2)
     attrs = ds.attrs
@@ -215,7 +235,7 @@ def read_record(ds, name="result") -> ResultModel:
     if missing:
         raise bad(f"no {', '.join(missing)}")
     for v in RECORD_DIMS:
-        if v not in ds.variables or ds[v].dtype.kind != "f":
+        if v not in ds.variables or ds[v].dtype.kind != "f" or v == "granule_toward_solid":  # NaN: away from the solid
             continue
         values = ds[v].values
         if np.isnan(values).any() or (v not in ("wall_drive", "load_params") and not np.isfinite(values).all()):  # a drive may run forever
@@ -247,7 +267,8 @@ def read_record(ds, name="result") -> ResultModel:
     damped = np.asarray(ds["wall_damped"].values) if "wall_damped" in ds.variables else np.ones(counts["wall"], np.int8)
     if not np.isin(damped, (0, 1)).all():
         raise bad("wall_damped is neither 0 nor 1")
-    walls = tuple(WallRecord(str(lab), tuple(p0), tuple(p1), tuple(nrm), str(m), tuple(float(x) for x in d), bool(dmp))
+    walls = tuple(WallRecord(name=str(lab), p0=tuple(p0), p1=tuple(p1), normal=tuple(nrm), medium=str(m),
+                             drive=tuple(float(x) for x in d), damped=bool(dmp))
                   for lab, p0, p1, nrm, m, d, dmp in zip(ds["wall"].values, f("wall_p0"), f("wall_p1"),
                                                          f("wall_normal"), ds["wall_medium"].values, f("wall_drive"),
                                                          damped))
@@ -261,9 +282,20 @@ def read_record(ds, name="result") -> ResultModel:
             raise bad("an element's node is out of range")
     omega = f("mode_omega") if "mode_omega" in ds.variables else None
     loads = _read_loads(ds, n, bad)
-    return ResultModel(labels, media, np.array([media.index(m) for m in names], np.int64), f("granule_position0"),
-                       f("granule_radius"), f("granule_mass"), f("granule_inertia"), f("granule_modulus"),
-                       f("granule_poisson"), *law, walls, contacts, kind, dofs, recipe, digest, nodes, elements, omega, loads)
+    toward = f("granule_toward_solid")
+    unit = np.isnan(toward).all(axis=1) | (np.abs(np.hypot(toward[:, 0], toward[:, 1]) - 1.0) < 1e-12)
+    if not unit.all():
+        raise bad("granule_toward_solid holds a vector that is neither a unit vector nor NaN")
+    strikers = np.asarray(ds["striker_granule"].values, np.int64)
+    if np.any((strikers < 0) | (strikers >= n)):
+        raise bad("a striker's granule is out of range")
+    mu, alpha_n, k_s, skin = law
+    return ResultModel(labels=labels, media=media, medium_index=np.array([media.index(m) for m in names], np.int64),
+                       position0=f("granule_position0"), radius=f("granule_radius"), mass=f("granule_mass"),
+                       inertia=f("granule_inertia"), E=f("granule_modulus"), nu=f("granule_poisson"), mu=mu,
+                       alpha_n=alpha_n, k_s=k_s, skin=skin, walls=walls, contacts=contacts, solid_kind=kind,
+                       solid_dofs=dofs, solid_recipe=recipe, solid_digest=digest, nodes=nodes, elements=elements,
+                       mode_omega=omega, loads=loads, toward_solid=toward, strikers=tuple(int(g) for g in strikers))
 
 
 def _read_loads(ds, n: int, bad) -> tuple[LoadRecord, ...]:
@@ -272,14 +304,18 @@ def _read_loads(ds, n: int, bad) -> tuple[LoadRecord, ...]:
     sizes = np.asarray(ds["load_table_size"].values, np.int64)
     times, values = np.asarray(ds["load_table_time"].values, float), np.asarray(ds["load_table_value"].values, float)
     kinds = [str(k) for k in ds["load_kind"].values]
+    toward = np.asarray(ds["load_toward"].values, np.int64)
     if np.any((granule < 0) | (granule >= n)):
         raise bad("a load's granule is out of range")
+    if not np.isin(toward, (-1, 0, 1)).all():
+        raise bad("load_toward is not -1, 0 or 1")
     if np.any(sizes < 0) or sizes.sum() != len(times) or len(times) != len(values):
         raise bad("the load tables' sizes do not add up")
     ends = np.cumsum(sizes)
-    return tuple(LoadRecord(int(g), tuple(d), k, tuple(float(x) for x in par), tuple(times[e - s:e]), tuple(values[e - s:e]))
-                 for g, d, k, par, s, e in zip(granule, np.asarray(ds["load_direction"].values, float), kinds,
-                                               np.asarray(ds["load_params"].values, float), sizes, ends))
+    return tuple(LoadRecord(granule=int(g), direction=tuple(d), kind=k, params=tuple(float(x) for x in par),
+                            times=tuple(times[e - s:e]), values=tuple(values[e - s:e]), toward=int(w))
+                 for g, d, k, par, s, e, w in zip(granule, np.asarray(ds["load_direction"].values, float), kinds,
+                                                  np.asarray(ds["load_params"].values, float), sizes, ends, toward))
 
 
 def check_result_model(ds, rec: ResultModel, name) -> None:
@@ -304,3 +340,19 @@ def check_result_model(ds, rec: ResultModel, name) -> None:
         for v in ("solid_eta", "solid_eta_dot", "solid_x", "solid_v", "mode_omega"):
             if v in ds.variables and not np.all(np.isfinite(ds[v].values)):
                 raise bad(f"{v} is not finite")
+
+
+def read_result(path, what: str = "result file"):
+    """A result file of this granel, read and checked: its structure (`results.check_result_schema`),
+    its model record, and their agreement (`check_result_model`). ResultFileError naming the file
+    (code 4: not readable as NetCDF; 2: not a result, damaged, or of an earlier granel, which
+    `run.load_result` reads)."""
+    from pathlib import Path
+
+    from .results import check_result_schema, read_netcdf_or
+
+    path = Path(path)
+    ds = read_netcdf_or(path, ResultFileError, what)
+    check_result_schema(ds, path)
+    check_result_model(ds, read_record(ds, path), path)
+    return ds

@@ -86,6 +86,10 @@ def read_netcdf_or(path: str | Path, error=ResultFileError, what: str = "result 
         check_file(path, what)
     except InputFileError as e:
         raise _with_code(error(str(e)), e.code) from None
+    try:
+        import h5netcdf  # noqa: F401 - the backend, loaded first: xarray reports a failed load as "not installed"
+    except ImportError as e:  # a library that cannot be loaded now (too many open files, ...)
+        raise _with_code(error(f"{path}: cannot be read: the NetCDF library cannot be loaded ({e})"), 4) from None
     import gc
 
     previous = sys.unraisablehook
@@ -150,7 +154,8 @@ RECORD_DIMS = {
     "solid_node_position": ("solid_node", "xy"), "solid_element_nodes": ("solid_element", "element_node"),
     "load_granule": ("load",), "load_direction": ("load", "xy"), "load_kind": ("load",),
     "load_params": ("load", "load_param"), "load_table_size": ("load",), "load_table_time": ("load_table",),
-    "load_table_value": ("load_table",),
+    "load_table_value": ("load_table",), "load_toward": ("load",),
+    "granule_toward_solid": ("granule", "xy"), "striker_granule": ("striker",),
 }
 RESULT_DIMS.update(RECORD_DIMS)
 # the variables that hold names

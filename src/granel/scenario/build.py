@@ -12,11 +12,13 @@ import numpy as np
 
 from ..coupling.driver import Guards, Schedule
 from ..coupling.settings import LARGE_SOLID_MODES, SolverSettings
-from ..granular.packing import Wall, chain, hexagonal_columns, medium_from_table
+from ..granular.packing import Placement, Wall, chain, hexagonal_columns, medium_from_table
 from ..guard.reading import InputFileError
 from ..granular.scales import auto_mode_cutoff, load_kinks, load_scales, safe_time_step
-from ..granular.system import ContactLaw, Excitation, SolidContact, build_system, initial_state
-from ..granular.materials import impact_overlap, pair_coefficients, static_overlap, wall_coefficients
+from ..granular.system import MEDIUM_TOWARD_SOLID, ContactLaw, Excitation, SolidContact, build_system, initial_state
+from ..granular.contact import hertz_force, hertz_overlap, impact_overlap, tsuji_damping
+from ..granular.kernels import FRICTION_MARGIN, RK4_REAL_LIMIT, SUBSTEP_RATE_STEP
+from ..granular.materials import damping_coefficient, pair_coefficients, wall_coefficients
 from ..problem import Problem
 from ..solid.base import SolidModel
 from ..solid.plate import PlateMesh
@@ -52,17 +54,14 @@ def build_media(sc: Scenario, base: Path | None = None):
             if np.any(med.radius <= 0):
                 raise ScenarioError(f"media.{k}.granules_file = {m.granules_file!r}: radius must be positive")
         elif m.radii is not None:
-            face, center = _face_and_centre(m, solid)
             mats = [sc.materials[name].material() for name in (m.materials or [m.material] * len(m.radii))]
             try:
-                med = chain(m.name, list(m.radii), mats, m.side, face, center, tuple(m.walls or ()), m.gap, m.grow)
+                med = chain(m.name, list(m.radii), mats, _placement(m, solid), tuple(m.walls or ()))
             except ValueError as e:
                 raise ScenarioError(f"media.{k}: {e}") from None
         else:
-            face, center = _face_and_centre(m, solid)
             try:
-                med = hexagonal_columns(m.name, m.columns, m.radius, mat, m.side, face, center, m.labels,
-                                        m.wall_names(), m.gap, m.grow)
+                med = hexagonal_columns(m.name, m.columns, m.radius, mat, _placement(m, solid), m.labels, m.wall_names())
             except ValueError as e:
                 raise ScenarioError(f"media.{k}: {e}") from None
         if m.undamped_walls:
@@ -72,9 +71,15 @@ def build_media(sc: Scenario, base: Path | None = None):
     return media
 
 
+def _placement(m, solid) -> Placement:
+    """Where a built medium starts (`granular.packing.Placement`): its face line (x, or y growing up
+    or down) and the centre of its first column along it (the solid's face and mid-length beside a
+    solid, else 0), its gap and growth."""
+    face, center = _face_and_centre(m, solid)
+    return Placement(m.side, face, center, m.gap, m.grow)
+
+
 def _face_and_centre(m, solid) -> tuple[float, float]:
-    """Where a built medium starts: its face line (x, or y growing up or down) and the centre of
-    its first column along it (the solid's face and mid-length beside a solid, else 0)."""
     if m.grow in ("up", "down"):
         return m.face_y or 0.0, m.center_x or 0.0
     if solid is not None and m.side != "none":
@@ -106,13 +111,14 @@ def solid_contacts_for(sc: Scenario, media) -> list:
     return out
 
 
-def excitation_direction(spec: ExcitationSpec, side: str) -> tuple[float, float]:
+def excitation_direction(spec: ExcitationSpec, side: str) -> tuple[tuple[float, float], int]:
+    """(The load's direction vector, how it was given: +1 toward the solid, -1 away, 0 a vector)."""
     if isinstance(spec.direction, tuple):
-        return spec.direction
-    toward = (1.0, 0.0) if side == "left" else (-1.0, 0.0)
-    if side not in ("left", "right"):
+        return spec.direction, 0
+    if side not in MEDIUM_TOWARD_SOLID:
         raise ScenarioError(f"excitation on {spec.granule}: direction 'toward_solid' needs a medium beside the solid; give a vector")
-    return toward if spec.direction == "toward_solid" else (-toward[0], -toward[1])
+    toward = MEDIUM_TOWARD_SOLID[side]
+    return (toward, 1) if spec.direction == "toward_solid" else ((-toward[0], -toward[1]), -1)
 
 
 def build_granular(sc: Scenario, base: Path | None = None):
@@ -131,8 +137,10 @@ def build_granular(sc: Scenario, base: Path | None = None):
             raise ScenarioError(f"excitations.{k}.file: {err}", err.code) from None
         except (OSError, ValueError) as err:
             raise ScenarioError(f"excitations.{k}.file = {e.file!r}: {err}") from None
-        exc.append(Excitation(labels.index(e.granule), excitation_direction(e, side_of[e.granule]), hist))
-    walls = [Wall(w.p0, w.p1, w.normal, w.medium, w.name, w.motion.drive() if w.motion is not None else None, w.damped)
+        direction, toward = excitation_direction(e, side_of[e.granule])
+        exc.append(Excitation(labels.index(e.granule), direction, hist, toward))
+    walls = [Wall(p0=w.p0, p1=w.p1, normal=w.normal, medium=w.medium, name=w.name,
+                  drive=w.motion.drive() if w.motion is not None else None, damped=w.damped)
              for w in sc.walls]
     system = build_system(media, law, solid_contacts_for(sc, media), exc, walls)
     vel = np.zeros((system.n, 2))
@@ -143,6 +151,7 @@ def build_granular(sc: Scenario, base: Path | None = None):
         g = labels.index(iv.granule)
         vel[g] = iv.v
         om[g] = iv.omega
+    system.strikers = tuple(labels.index(iv.granule) for iv in sc.initial_velocities)
     return system, initial_state(system, vel, om), media
 
 
@@ -193,7 +202,7 @@ def check_geometry(sc: Scenario, system) -> None:
 
 def _wall_hertz(system, g) -> float:
     """A of granule g against a rigid wall, eq. (3)."""
-    return float(wall_coefficients(system.E[g], system.nu[g], system.radius[g], system.mass[g], 0.0)[0])
+    return float(wall_coefficients(system.bodies(g), 0.0)[0])
 
 
 def check_load_overlaps(sc: Scenario, system) -> None:
@@ -211,7 +220,7 @@ def check_load_overlaps(sc: Scenario, system) -> None:
 
     for k, e in enumerate(system.excitations):
         g, F, J = e.granule, e.history.peak(), e.history.peak_impulse()
-        delta = static_overlap(F, _wall_hertz(system, g)) if math.isfinite(F) and F > 0 else 0.0
+        delta = hertz_overlap(F, _wall_hertz(system, g)) if math.isfinite(F) and F > 0 else 0.0
         if delta > limit * system.radius[g]:
             refuse(f"excitations.{k}", f"a peak force of {F:.3e} N", g, delta)
         if math.isfinite(J) and J > 0:
@@ -229,8 +238,6 @@ def check_load_overlaps(sc: Scenario, system) -> None:
 
 # the compiled RK4 follows stiff sliding by sub-steps; beyond this many per step a run would crawl
 MAX_SUBSTEPS = 1000
-# RK4 is stable for a decay rate r with r h below 2.785 (its real-axis limit)
-RK4_REAL_LIMIT = 2.785
 
 
 def check_contact_rates(sc: Scenario, system) -> None:
@@ -248,21 +255,21 @@ def check_contact_rates(sc: Scenario, system) -> None:
         if v > 0:  # the peak force of a Hertz impact on a wall: A delta_max^(3/2)
             A = _wall_hertz(system, g)
             delta = impact_overlap(system.mass[g], v, A)
-            pushed.append((g, A * delta**1.5, f"the impact at initial_velocities.{k}"))
+            pushed.append((g, hertz_force.py_func(A, delta), f"the impact at initial_velocities.{k}"))
     for g, F, what in pushed:
         if not (math.isfinite(F) and F > 0):
             continue
         m = system.mass[g]
         rate = c.mu * c.k_s * F / (m / 3.0)
-        if 1.5 * rate * dt / 2.0 > MAX_SUBSTEPS:
+        substeps = FRICTION_MARGIN * rate * dt / SUBSTEP_RATE_STEP  # `kernels.friction_substeps`
+        if substeps > MAX_SUBSTEPS:
             raise ScenarioError(f"contact.k_s = {c.k_s:g} s/m: at {what} ({F:.3e} N) the tanh friction (eq. 5) relaxes "
-                                f"sliding at {rate:.2e} 1/s, which needs about {1.5 * rate * dt / 2.0:.1e} RK4 sub-steps "
+                                f"sliding at {rate:.2e} 1/s, which needs about {substeps:.1e} RK4 sub-steps "
                                 f"per step dt = {dt:.3e} s (limit {MAX_SUBSTEPS}); lower contact.k_s (the paper: 100 s/m) "
                                 "or simulation.dt")
-        A = float(pair_coefficients(system.E[g], system.nu[g], system.radius[g], m, system.E[g], system.nu[g],
-                                    system.radius[g], m, c.alpha_n)[0])
-        delta = static_overlap(F, A)
-        decay = c.alpha_n * math.sqrt(A / (m / 2.0)) * delta**0.25
+        A = float(pair_coefficients(system.bodies(g), system.bodies(g), c.alpha_n)[0])
+        delta = hertz_overlap(F, A)
+        decay = tsuji_damping.py_func(damping_coefficient(c.alpha_n, m / 2.0, A), delta) / (m / 2.0)  # gamma / m*
         if decay * dt > RK4_REAL_LIMIT:
             raise ScenarioError(f"contact.alpha_n = {c.alpha_n:g}: at {what} ({F:.3e} N) the contact damping (eq. 3) decays "
                                 f"relative motion at {decay:.2e} 1/s, too fast for RK4 at dt = {dt:.3e} s (rate dt = "
@@ -313,12 +320,11 @@ def solid_recipe(sc: Scenario, system) -> SolidRecipe:
     if kind == "rigid":
         return SolidRecipe("rigid", contacts)
     mat, mesh = sc.materials[s.material], s.mesh
-    if kind == "beam":
-        return SolidRecipe("beam", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, rho=mat.rho,
-                           beam_elements=s.beam_elements, clamped=tuple(s.clamped))
-    return SolidRecipe("plate", contacts, s.x0, s.y0, s.width, s.length, s.thickness, mat.E, mat.nu, mat.rho,
-                       PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers),
-                       clamped=tuple(s.clamped))
+    box = dict(x0=s.x0, y0=s.y0, width=s.width, length=s.length, thickness=s.thickness, E=mat.E, rho=mat.rho)
+    if kind == "beam":  # Poisson's ratio unused: it keeps its default
+        return SolidRecipe("beam", contacts, **box, beam_elements=s.beam_elements, clamped=tuple(s.clamped))
+    return SolidRecipe("plate", contacts, **box, nu=mat.nu, clamped=tuple(s.clamped),
+                       mesh=PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers))
 
 
 def solver_settings(sc: Scenario) -> SolverSettings:
@@ -355,8 +361,10 @@ def build_problem(sc: Scenario) -> Problem:
         max_modes = LARGE_SOLID_MODES
     from .files import input_digests, input_texts
 
-    return Problem(system, state, solid, settings, schedule(sc), text, guards, force0, report, table,
-                   input_digests(sc), input_texts(sc), scales=scales, kinks=tuple(load_kinks(system)), max_modes=max_modes)
+    return Problem(system=system, state=state, solid=solid, settings=settings, schedule=schedule(sc), source=text,
+                   guards=guards, solid_force0=force0, equilibrium=report, equilibrium_contacts=table,
+                   inputs=input_digests(sc), input_texts=input_texts(sc), scales=scales,
+                   kinks=tuple(load_kinks(system)), max_modes=max_modes)
 
 
 def equilibrate(system, state, solid):
@@ -378,7 +386,14 @@ def equilibrate(system, state, solid):
         eq = equilibrium(system, Stepper(system).model, C)
     except NoEquilibrium as err:
         raise ScenarioError(f"simulation.equilibrate: {err}") from None
-    state.y[: 2 * system.n] = eq.pos.ravel()
+    state.pos[:] = eq.pos
     from ..io.results import wall_names
 
     return eq.solid_forces, eq.summary(), eq.contacts(system.labels, wall_names(system))
+
+
+def built_models(sc: Scenario):
+    """(GranularSystem, SolidModel) of a scenario, for drawings of the scenario (not of a result:
+    a result carries its model, `io.model`)."""
+    problem = build_problem(sc)
+    return problem.system, problem.solid

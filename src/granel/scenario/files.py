@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import tomli_w
 from pydantic import ValidationError
 
-from ..guard.reading import InputFileError, read_toml
+from ..guard.reading import InputFileError, parse_toml, read_stdin, read_toml
 from .schema import Scenario, ScenarioError
 
 
@@ -35,6 +36,9 @@ def _format_validation_error(err: ValidationError) -> str:
     return "invalid scenario: " + "; ".join(lines)
 
 
+STDIN = "-"  # the scenario source that means standard input, as Unix tools read it
+
+
 def builtin_names() -> list[str]:
     return [p.name[:-5] for p in resources.files("granel.scenario").joinpath("builtin").iterdir() if p.name.endswith(".toml")]
 
@@ -44,6 +48,14 @@ def load_raw(source: str | Path) -> tuple[dict, Path | None]:
     problem reading or parsing the file is a ScenarioError naming it (and the line), with the
     reader's exit code (`guard.reading`)."""
     src = str(source)
+    if src == STDIN:  # relative table paths then resolve against the working folder
+        try:
+            text = read_stdin("scenario")
+            if not text.strip():
+                raise ScenarioError("scenario -: standard input is empty; pipe a scenario in, e.g. granel run - < my.toml")
+            return parse_toml(text, "scenario (standard input)"), Path.cwd()
+        except InputFileError as e:
+            raise ScenarioError(str(e), e.code) from None
     if src in builtin_names():
         text = resources.files("granel.scenario").joinpath("builtin").joinpath(f"{src}.toml").read_text()
         return tomllib.loads(text), None
@@ -182,7 +194,7 @@ def with_input_texts(raw: dict, texts: dict[str, str], folder: Path) -> dict:
         if isinstance(name, str) and name in texts:
             path = folder / f"{hashlib.sha1(name.encode()).hexdigest()[:12]}-{Path(name).name}"
             if not path.exists():
-                path.write_text(texts[name])
+                path.write_text(texts[name], encoding="utf-8")
             table[key] = str(path)
     return out
 
@@ -191,6 +203,22 @@ def referenced_files(sc: Scenario) -> list[Path]:
     """Every file the scenario reads besides itself (granule tables, load tables), as the run
     opens them (relative to the scenario's folder)."""
     return list(_referenced(sc).values())
+
+
+def scenario_inputs(source: str, sc: Scenario) -> list[Path]:
+    """The files a command reads for the scenario `source` (a name, a file or -): the scenario
+    file itself and every file it refers to."""
+    return [scenario_file(source), *referenced_files(sc)]
+
+
+def contact_note(sc: Scenario) -> str | None:
+    """What a user should be told of a scenario without [contact] (it runs with the paper's
+    friction and damping), or None."""
+    if "contact" in sc.model_fields_set:
+        return None
+    c = sc.contact
+    return (f"no [contact] table: the paper's contact law applies (mu = {c.mu:g}, alpha_n = {c.alpha_n:g}, "
+            f"k_s = {c.k_s:g} s/m); write [contact] with mu = 0.0 and alpha_n = 0.0 for frictionless, undamped contacts")
 
 
 def input_digests(sc: Scenario) -> dict[str, str]:
@@ -204,5 +232,47 @@ def input_digests(sc: Scenario) -> dict[str, str]:
 
 def scenario_file(source: str | Path) -> Path | None:
     """The file a scenario source names (None for a built-in name)."""
-    return None if str(source) in builtin_names() else Path(source)
+    return None if str(source) in builtin_names() or str(source) == STDIN else Path(source)
 
+
+def referenced_names(source, overrides=()) -> list[str]:
+    """The granule and load tables a scenario (with `overrides`) names, as written (relative to
+    its folder); [] when it cannot be read (its errors are reported where it is loaded)."""
+    try:
+        raw = apply_overrides(load_raw(source)[0], list(overrides))
+    except ScenarioError:
+        return []
+    names = [m.get("granules_file") for m in raw.get("media", []) if isinstance(m, dict)]
+    names += [e.get("file") for e in raw.get("excitations", []) if isinstance(e, dict)]
+    return [n for n in names if isinstance(n, str) and n]
+
+
+def check_source(source, overrides=()) -> None:
+    """ScenarioError when a scenario cannot be read or its `overrides` cannot be applied (whether
+    the result is a valid scenario is checked where it is loaded)."""
+    try:
+        raw, _ = load_raw(source)
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"cannot read {source} ({e})") from None
+    apply_overrides(raw, list(overrides))
+
+
+def builtin_description(name: str) -> str:
+    """The `description` of a built-in scenario."""
+    return str(load_raw(name)[0].get("description", ""))
+
+
+def shock_value(text: str | None):
+    """`--shock`: a level name (weak, moderate, strong), or a peak force in newtons (a number,
+    with or without N); None stays None. ScenarioError naming the option otherwise."""
+    from ..granular.loads import SHOCK_LEVELS
+
+    if text is None or text in SHOCK_LEVELS:
+        return text
+    try:
+        value = float(text.removesuffix("N"))
+    except ValueError:
+        raise ScenarioError(f"--shock {text!r}: give weak, moderate, strong or a peak force in N, e.g. 500") from None
+    if not math.isfinite(value):
+        raise ScenarioError(f"--shock {text!r}: the peak force must be finite")
+    return value

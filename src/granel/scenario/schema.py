@@ -10,7 +10,7 @@ from typing import Annotated, Literal, Union, get_args
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 from pydantic.fields import FieldInfo
 
-from ..granular.loads import PAPER_TAU, SHOCK_LEVELS, LoadHistory, chirp, constant_force, half_sine, harmonic, harmonic_burst
+from ..granular.loads import KINDS, PAPER_TAU, SHOCK_LEVELS, LoadHistory
 from ..guard.exits import InputError
 from ..granular.materials import Material
 from ..io.units import parse_time
@@ -355,7 +355,7 @@ class WallSpec(_Strict):
 
 class ExcitationSpec(_Strict):
     granule: str = Field(min_length=1)
-    kind: Literal["half_sine", "burst", "table", "constant", "harmonic", "chirp"] = "half_sine"
+    kind: Literal[tuple(KINDS)] = "half_sine"  # the kinds of `granular.loads`
     shock: Literal["weak", "moderate", "strong"] | None = None
     fmax: float | None = None
     tau: float = PAPER_TAU
@@ -401,55 +401,21 @@ class ExcitationSpec(_Strict):
 
     @model_validator(mode="after")
     def _needs(self):
-        if self.kind == "half_sine":
-            if self.fmax is None and self.shock is None:
-                raise ValueError("a half_sine needs 'fmax' [N] or 'shock' (weak | moderate | strong)")
-        elif self.kind == "burst":
-            for f in ("amplitude", "frequency", "cycles"):
-                if getattr(self, f) is None:
-                    raise ValueError(f"a burst needs '{f}'")
-        elif self.kind == "table":
-            if self.file is None:
-                raise ValueError("a table excitation needs 'file' (CSV of time,force)")
-        elif self.kind == "constant" and self.value is None:
-            raise ValueError("a constant excitation needs 'value' [N]")
-        elif self.kind == "harmonic":
-            for f in ("amplitude", "frequency"):
-                if getattr(self, f) is None:
-                    raise ValueError(f"a harmonic excitation needs '{f}'")
-        elif self.kind == "chirp":
-            for f in ("amplitude", "f0", "f1", "duration"):
-                if getattr(self, f) is None:
-                    raise ValueError(f"a chirp needs '{f}'")
+        lacks = KINDS[self.kind].lacks(lambda name: getattr(self, name))
+        if lacks:
+            raise ValueError(lacks)
         return self
 
-    def peak_force(self) -> float:
-        if self.kind == "half_sine":
-            return abs(self.fmax if self.fmax is not None else SHOCK_LEVELS[self.shock])
-        if self.kind in ("burst", "harmonic", "chirp"):
-            return abs(self.amplitude)
-        if self.kind == "constant":
-            return abs(self.value)
-        return float("nan")
-
     def history(self, base: Path | None = None) -> LoadHistory:
-        if self.kind == "half_sine":
-            fmax = self.fmax if self.fmax is not None else SHOCK_LEVELS[self.shock]
-            return half_sine(fmax, self.tau, self.t0)
-        if self.kind == "burst":
-            return harmonic_burst(self.amplitude, self.frequency, self.cycles, self.t0)
-        if self.kind == "constant":
-            return constant_force(self.value)
-        if self.kind == "harmonic":
-            return harmonic(self.amplitude, self.frequency, self.t0, self.duration or math.inf, self.phase, self.ramp_cycles)
-        if self.kind == "chirp":
-            return chirp(self.amplitude, self.f0, self.f1, self.duration, self.t0, self.mode, self.ramp_cycles)
-        from .tables import read_load_table
+        """The load's history (`granular.loads`, by its kind); a table is read from `file`,
+        relative to `base`."""
+        def read_table():
+            from .tables import read_load_table
 
-        path = Path(self.file)
-        if base is not None and not path.is_absolute():
-            path = base / path
-        return read_load_table(path)
+            path = Path(self.file)
+            return read_load_table(base / path if base is not None and not path.is_absolute() else path)
+
+        return KINDS[self.kind].from_fields(lambda name: getattr(self, name), read_table)
 
 
 class InitialVelocitySpec(_Strict):

@@ -92,3 +92,31 @@ def template(name: str) -> str:
         lines.append(line)
     lines += _unset_lines(model, present)
     return "\n".join(lines) + "\n"
+
+
+def write_template(name: str, output=None):
+    """`granel init`: write `template(name)` to `output` (default NAME.toml), never over an
+    existing file. InputError (exit 2) or FileError (exit 4) naming the name or the file."""
+    from pathlib import Path
+
+    from ..guard.commandline import text_argument
+    from ..guard.exits import FileError, InputError, describe
+    from ..guard.outputs import check_folder_writable, check_name_lengths
+    from ..guard.writing import atomic_path, storable
+
+    if not name.strip() or "/" in name or name.startswith("."):
+        raise InputError(f"NAME {name!r}: give a plain name, e.g. mychain")
+    out = Path(output) if output is not None else Path(f"{name}.toml")  # the name's bytes as given: a file name
+    name = text_argument(name)
+    if storable(name) != name:
+        raise InputError(f"NAME {storable(name)}: not UTF-8 text")
+    check_name_lengths(out, "-o")  # the output rules' checks of a name and its folder (exit 2 or 4)
+    if out.exists():  # before the folder's check: a device in /dev is refused as such
+        raise InputError(f"{out}: exists; granel init never replaces a file (choose another NAME or -o)")
+    check_folder_writable(out.absolute().parent, "-o", out)
+    try:
+        with atomic_path(out) as tmp:
+            Path(tmp).write_text(template(name), encoding="utf-8")
+    except OSError as e:
+        raise FileError(f"{out}: cannot write it ({describe(e)}{': ' + str(e.filename) if e.filename else ''})") from None
+    return out

@@ -7,18 +7,12 @@ paper's plate thickness under `--solid rigid`): only what the user asks to chang
 
 from __future__ import annotations
 
+from ..granular.loads import KINDS
 from .schema import Scenario, ScenarioError
 
-# the load fields each kind of excitation reads (`ExcitationSpec.history`), besides these
+# the load fields each kind of excitation reads (its class's `fields`), besides these
 LOAD_COMMON = {"granule", "kind", "direction"}
-LOAD_FIELDS = {
-    "half_sine": {"shock", "fmax", "tau", "t0"},
-    "burst": {"amplitude", "frequency", "cycles", "t0"},
-    "table": {"file"},
-    "constant": {"value"},
-    "harmonic": {"amplitude", "frequency", "phase", "ramp_cycles", "duration", "t0"},
-    "chirp": {"amplitude", "f0", "f1", "duration", "mode", "ramp_cycles", "t0"},
-}
+LOAD_FIELDS = {kind: set(cls.fields) for kind, cls in KINDS.items()}
 # the solid fields each kind builds with (`build.build_solid`); the position and size also place
 # the media and the contact points of every kind but "none"
 SOLID_FIELDS = {

@@ -14,6 +14,27 @@ import scipy.sparse as sp
 
 
 @dataclass(frozen=True)
+class Slab:
+    """Where an elastic solid lies: the rectangle x0 <= x <= x0 + width, y0 <= y <= y0 + length in
+    the granular plane [m], and its thickness out of that plane [m]."""
+
+    x0: float
+    y0: float
+    width: float
+    length: float
+    thickness: float
+
+
+@dataclass(frozen=True)
+class Material:
+    """An isotropic linear elastic material (of a solid or of the granules)."""
+
+    E: float  # Young's modulus [Pa]
+    rho: float  # density [kg/m^3]
+    nu: float  # Poisson's ratio [-]
+
+
+@dataclass(frozen=True)
 class ContactPoint:
     """Where a granule touches the solid: position, unit normal n_ik (granule -> solid), and
     the reduced DOFs of the driven motion (-1 where the model has none)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, SolidModel
+from .base import ContactPoint, Material, Slab, SolidModel
 
 
 def hermite_stiffness(EI: float, l: float) -> np.ndarray:
@@ -22,10 +22,13 @@ def hermite_mass(rhoA: float, l: float) -> np.ndarray:
                                       [54, 13 * l, 156, -22 * l], [-13 * l, -3 * l * l, -22 * l, 4 * l * l]])
 
 
-def build_beam(x0, y0, width, length, thickness, E, rho, contacts, n_elements=40, clamped=(True, True)) -> SolidModel:
-    """The Euler-Bernoulli beam model (eq. 9): Hermite cubic elements, consistent mass, the ends
-    clamped where `clamped` says. contacts: list of (name, edge 'left'/'right', y). Cross-section:
-    depth = width (x), thickness (z); A = width * thickness, I = thickness * width^3 / 12."""
+def build_beam(slab: Slab, material: Material, contacts, n_elements=40, clamped=(True, True)) -> SolidModel:
+    """The Euler-Bernoulli beam model (eq. 9) of the solid `slab`: Hermite cubic elements,
+    consistent mass, the ends clamped where `clamped` says. contacts: list of (name, edge
+    'left'/'right', y). Cross-section: depth = width (x), thickness (z); A = width * thickness,
+    I = thickness * width^3 / 12 (Poisson's ratio unused)."""
+    x0, y0, width, length, thickness = slab.x0, slab.y0, slab.width, slab.length, slab.thickness
+    E, rho = material.E, material.rho
     A = width * thickness
     I = thickness * width**3 / 12.0
     l = length / n_elements

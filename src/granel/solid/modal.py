@@ -16,7 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..guard.jit import njit
 from .base import SolidModel
+
+
+@njit(cache=True, inline="always")
+def mode_energy(eta, etad, omega):
+    """Eq. (15): the kinetic 1/2 eta'^2 and strain 1/2 omega^2 eta^2 energies of a mode in
+    mass-normalised coordinates (elementwise on arrays through `.py_func`)."""
+    return 0.5 * etad * etad, 0.5 * omega**2 * eta * eta
 
 
 @dataclass

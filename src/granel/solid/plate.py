@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, SolidModel
+from .base import ContactPoint, Material, Slab, SolidModel
 
 
 @dataclass(frozen=True)
@@ -82,15 +82,18 @@ def edge_distribution(y0: float, length: float, layers: list[tuple[float, float]
     return np.array(out), new_counts
 
 
-def plate_mesh(x0, y0, width, length, left_layers, right_layers, nx=8, growth=1.6, max_size=2.5e-3,
-               x_growth=1.5):
-    """A structured Q8 mesh, graded toward the contact points.
+def plate_mesh(slab: Slab, left_layers, right_layers, how: PlateMesh = None):
+    """A structured Q8 mesh of the rectangle of `slab`, graded toward the contact points as `how`
+    says (left_layers, right_layers: (height, half length) of each rigid layer on that edge).
 
     Both vertical edges get node heights with exactly two elements on each rigid layer; the
     interior nodes blend the two edge distributions linearly across the width, so every layer
     is matched exactly while elements stay nearly rectangular. Layer heights missing on one edge
     are mirrored from the other so that the two distributions have the same structure.
     """
+    how = how or PlateMesh()
+    x0, y0, width, length = slab.x0, slab.y0, slab.width, slab.length
+    nx, growth, max_size, x_growth = how.nx, how.growth, how.max_size, how.x_growth
     heights = sorted({round(y, 12) for y, _ in left_layers} | {round(y, 12) for y, _ in right_layers})
     L = {round(y, 12): a for y, a in left_layers}
     R = {round(y, 12): a for y, a in right_layers}
@@ -183,27 +186,40 @@ class PlateMesh:
 PLATE_CACHE_VERSION = 2  # raise when the assembly below changes what it produces
 
 
-def build_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
+def build_plate(slab: Slab, material: Material, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
                 clamped=(True, True)) -> SolidModel:
-    """The reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one per
-    layer). The assembled matrices are cached on disk by the arguments, so that a run needs no
+    """The reduced plate model (eq. 7, Q8, consistent mass) of the solid `slab` with its contact
+    points (one per layer). The assembled matrices are cached on disk by the arguments, so that a run needs no
     scikit-fem (a slow import); the element-level quantities of figures and
     movies (`element_energies`, `basis`) assemble the plate again on first use. A plate that
     differs from a cached one only in thickness, Young's modulus and density is that plate
     scaled (K by E h, M by rho h, the element volumes by h; `_scaled_plate`)."""
-    args = (x0, y0, width, length, thickness, E, nu, rho, tuple(layers), mesh, tuple(clamped))
+    args = _plate_args(slab, material, layers, mesh, clamped)
     path = _plate_cache_path(args)
     model, damage = _load_plate(path, args)
     if model is None:
         model = _scaled_plate(path, args)
         if model is None:
-            model = assemble_plate(*args)
+            model = assemble_plate(*_plate_parts(args))
         if damage:
-            from .mode_cache import note
+            from .cache_files import note
 
             note(("rebuilt", path), f"cache: {damage}; the plate is built again")
         _save_plate(path, model, args)
     return model
+
+
+def _plate_args(slab: Slab, material: Material, layers, mesh: PlateMesh, clamped) -> tuple:
+    """A plate's arguments as one flat tuple, the key of its cache file (the layout of cache
+    version 2: x0, y0, width, length, thickness, E, nu, rho, layers, mesh, clamped)."""
+    return (slab.x0, slab.y0, slab.width, slab.length, slab.thickness, material.E, material.nu, material.rho,
+            tuple(layers), mesh, tuple(clamped))
+
+
+def _plate_parts(args: tuple) -> tuple:
+    """The arguments of `assemble_plate` from the flat tuple of `_plate_args`."""
+    x0, y0, width, length, thickness, E, nu, rho, layers, mesh, clamped = args
+    return Slab(x0, y0, width, length, thickness), Material(E, rho, nu), list(layers), mesh, clamped
 
 
 def _scale_free_args(args) -> tuple:
@@ -217,7 +233,7 @@ def _plate_cache_path(args):
     """plate-FAMILY-KEY.npz: KEY by all the arguments, FAMILY by the scale-free ones."""
     import hashlib
 
-    from .mode_cache import cache_dir
+    from .cache_files import cache_dir
 
     key = hashlib.sha256(repr((PLATE_CACHE_VERSION, args)).encode()).hexdigest()[:24]
     family = hashlib.sha256(repr(_scale_free_args(args)).encode()).hexdigest()[:12]
@@ -226,10 +242,10 @@ def _plate_cache_path(args):
 
 def _save_plate(path, model: SolidModel, args) -> None:
     """The assembled arrays of a plate model into the cache, a checked cache file
-    (`mode_cache.write_checked`); a cache that cannot be written is skipped with a note."""
+    (`cache_files.write_checked`); a cache that cannot be written is skipped with a note."""
     import json
 
-    from .mode_cache import prune_cache, unwritable, write_checked
+    from .cache_files import prune_cache, unwritable, write_checked
 
     thickness, E, rho = args[4], args[5], args[7]
     arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
@@ -252,7 +268,7 @@ def _scaled_plate(path, args) -> SolidModel | None:
     thickness h0, modulus E0 and density rho0: K (E h) / (E0 h0), M (rho h) / (rho0 h0), element
     volumes h / h0; nothing else of the assembly depends on them. None without such a plate; a
     damaged one is removed."""
-    from .mode_cache import discard
+    from .cache_files import discard
 
     thickness, E, rho = args[4], args[5], args[7]
     family = path.name.split("-")[1]
@@ -274,7 +290,7 @@ def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]
     import json
     import zipfile
 
-    from .mode_cache import touch, verify
+    from .cache_files import touch, verify
 
     if not path.exists():
         return None, None
@@ -326,18 +342,20 @@ class CachedPlate(SolidModel):
 
     def _assembled(self) -> SolidModel:
         if getattr(self, "_full_model", None) is None:
-            self._full_model = assemble_plate(*self.args)
+            self._full_model = assemble_plate(*_plate_parts(self.args))
         return self._full_model
 
 
-def assemble_plate(x0, y0, width, length, thickness, E, nu, rho, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
+def assemble_plate(slab: Slab, material: Material, layers: list[LayerSpec], mesh: PlateMesh = PlateMesh(),
                    clamped=(True, True)) -> SolidModel:
-    """Assemble the reduced plate model (eq. 7, Q8, consistent mass) with its contact points (one
-    per layer)."""
+    """Assemble the reduced plate model (eq. 7, Q8, consistent mass) of the solid `slab` with its
+    contact points (one per layer)."""
+    x0, y0, width, length, thickness = slab.x0, slab.y0, slab.width, slab.length, slab.thickness
+    E, nu, rho = material.E, material.nu, material.rho
     rigid_layers, nx = mesh.rigid_layers, mesh.nx
     left = [(l.y, l.length / 2) for l in layers if l.edge == "left"]
     right = [(l.y, l.length / 2) for l in layers if l.edge == "right"]
-    mesh = plate_mesh(x0, y0, width, length, left, right, nx, mesh.growth, mesh.max_size, mesh.x_growth)
+    mesh = plate_mesh(slab, left, right, mesh)
     from skfem import Basis, ElementQuadS2, ElementVector, Functional
 
     basis = Basis(mesh, ElementVector(ElementQuadS2()), intorder=4)

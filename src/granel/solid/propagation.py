@@ -1,19 +1,8 @@
-"""Exact propagation of an undamped modal oscillator over a step under a polynomial force.
-
-A mass-normalised mode obeys eta'' + w^2 eta = g(t). Over a step [0, h] with g a cubic,
-g(tau) = sum_k g_k tau^k / k! (k = 0..3), the solution is, with x = w h,
-
-    eta(h)  = S0 eta0 + h S1 eta0'         + sum_k h^(k+2) S_(k+2) g_k
-    eta'(h) = -w^2 h S1 eta0 + S0 eta0'     + sum_k h^(k+1) S_(k+1) g_k
-
-where S_p(x) = sum_m (-x^2)^m / (2m + p)! (S0 = cos x, S1 = sin x / x): the convolution of the
-oscillator's impulse response sin(w (h - tau)) / w with tau^k / k! is h^(k+2) S_(k+2)(x).
-`oscillator_functions` evaluates S0..S5 to full precision for x from 0 to beyond 1e3.
-
-The force over a step is given in a basis H_b(tau) by its Taylor rows at tau = 0: through values
-at nodes (`interpolation_taylor`, the coupled solver's force models) or the cubic Hermite basis
-(`hermite_taylor`). `weights_at` gives, per mode, the displacement and velocity at tau per unit
-of each (modal) datum."""
+"""Exact propagation of an undamped modal oscillator eta'' + w^2 eta = g(t) over a step [0, h]
+under a cubic force g, in closed form through S_p(x) = sum_m (-x^2)^m / (2m + p)!, x = w h
+(`oscillator_functions`: S0..S5, x >= 0). The force is given in a basis by its Taylor rows at the
+step's start (`interpolation_taylor`, `hermite_taylor`); `weights_at` gives each mode's
+displacement and velocity per unit datum. docs/performance.md ("Propagation") gives the formulas."""
 
 from __future__ import annotations
 

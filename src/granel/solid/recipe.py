@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 
-from .base import SolidModel, rigid_solid
+from .base import Material, Slab, SolidModel, rigid_solid
 from .beam import build_beam
 from .plate import LayerSpec, PlateMesh, build_plate
 
@@ -50,6 +50,14 @@ class SolidRecipe:
     beam_elements: int = 0
     clamped: tuple[bool, bool] = (True, True)
 
+    @property
+    def slab(self) -> Slab:
+        return Slab(self.x0, self.y0, self.width, self.length, self.thickness)
+
+    @property
+    def material(self) -> Material:
+        return Material(self.E, self.rho, self.nu)
+
     def to_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
 
@@ -75,11 +83,11 @@ def build_solid_model(recipe: SolidRecipe) -> SolidModel:
     if r.kind == "rigid":
         model = rigid_solid([(c.name, c.position, c.normal) for c in r.contacts])
     elif r.kind == "beam":
-        model = build_beam(r.x0, r.y0, r.width, r.length, r.thickness, r.E, r.rho,
-                           [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements, r.clamped)
+        model = build_beam(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
+                           r.clamped)
     elif r.kind == "plate":
         layers = [LayerSpec(c.name, c.edge, c.position[1], c.layer) for c in r.contacts]
-        model = build_plate(r.x0, r.y0, r.width, r.length, r.thickness, r.E, r.nu, r.rho, layers, r.mesh, r.clamped)
+        model = build_plate(r.slab, r.material, layers, r.mesh, r.clamped)
     else:
         raise ValueError(f"unknown solid kind {r.kind!r} (plate, beam or rigid)")
     model.recipe = recipe

@@ -1,17 +1,9 @@
-"""A solid's mirror symmetry about its mid-height, which splits its modal analysis in two.
-
-When a solid, its clamps, its mesh and its rigid layers are symmetric about y = y_c (the paper's
-plate with centred media), the reflection y -> 2 y_c - y is a signed permutation S of its DOFs
-(each node to its image, u_x kept, u_y and a layer's rotation flipped) with S' K S = K and
-S' M S = M. The eigenproblem K phi = w^2 M phi then splits into the modes symmetric under S and
-the antisymmetric ones:
-
-    Q_s = span{e_i + s e_j},  Q_a = span{e_i - s e_j}    (j the image of DOF i, s its sign)
-    (Q' K Q) z = w^2 (Q' M Q) z,   phi = Q z
-
-with Q orthonormal, so the shapes keep their mass normalisation; the two halves of a dense solve
-cost about a quarter of the whole (`modal.modal_analysis`). S is read from the mesh and checked
-on K and M to round-off; a solid without it is solved whole."""
+"""A solid's mirror symmetry about its mid-height y = y_c, which splits its modal analysis in two:
+the reflection is a signed permutation S of the DOFs (S' K S = K, S' M S = M), and the modes
+symmetric and antisymmetric under S each solve (Q' K Q) z = w^2 (Q' M Q) z, phi = Q z, on an
+orthonormal basis Q_s or Q_a, so the shapes stay mass-normalised (`modal.modal_analysis`). A
+solid without S (read from the mesh, checked on K and M to round-off) is solved whole.
+docs/solids.md ("Modal analysis") explains it."""
 
 from __future__ import annotations
 

@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .design import (TRIAL_CONSTRAINTS, DesignSpec, best_trials, design_scenario, design_warnings, evaluate_trial,
-                     trial_case)
+from .design import DesignSpec
+from .design_trials import (TRIAL_CONSTRAINTS, best_trials, design_scenario, design_warnings, evaluate_trial,
+                            trial_case)
+from .modes import study_mode
 from .screening import confirmed_trials
 
 # an objective re-evaluated at the tighter accuracy may move by this share of its value (or of
@@ -142,9 +144,9 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
 
 def draw_design(ax, sc, title: str) -> None:
     """A scenario's granules, walls and solid (no labels), in mm."""
-    from ..run import built_models
+    from ..scenario.build import built_models
     from ..scenario.build import present_solid
-    from ..viz.schematics import MM, draw_granules, draw_solid, draw_walls
+    from ..viz.drawing import MM, draw_granules, draw_solid, draw_walls
 
     system, model = built_models(sc)
     depth = 0.04 * float(np.ptp(system.pos0[:, 1]) + 2 * system.radius.max()) * MM
@@ -172,9 +174,9 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..analysis.reciprocity import input_energy
     from ..io.results import read_netcdf
 
+    mode = study_mode(spec.mode)
     if len(rows) < 2 or rows[1]["tight"].get("status") != "ok" or rows[0]["tight"].get("status") != "ok":
         return None
     fig, axes = plt.subplots(2, 2, figsize=(11, 8))
@@ -185,9 +187,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
         for path in _run_paths(out, r):
             ds = read_netcdf(path)
             t = ds["time"].values * 1e3
-            # a narrowband drive on a preloaded system does little work against the energy the
-            # preload stores: there the energies are shown in joules
-            w = 1.0 if spec.mode == "spectrum" else max(input_energy(ds), 1e-300)
+            w = mode.energy_scale(ds)
             run = path.stem.split("__", 1)[1]
             label = f"{r['label']}, {run}"
             if walls_matter:
@@ -199,8 +199,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
                     axes[1, 1].plot(t, ds[name].values / w, ls=ls, lw=1, label=f"{label}: {name[7:]}")
     axes[1, 0].set(xlabel="t [ms]", ylabel="largest wall force [N]" if walls_matter else "largest granule speed [m/s]",
                    title="wall force" if walls_matter else "speed")
-    axes[1, 1].set(xlabel="t [ms]", ylabel="energy held [J]" if spec.mode == "spectrum" else "energy / input work",
-                   title="energy held (tighter accuracy)" + (", first frequency" if spec.mode == "spectrum" else ""))
+    axes[1, 1].set(xlabel="t [ms]", ylabel=mode.energy_label, title=mode.energy_title)
     for ax in axes[1]:
         ax.legend(fontsize=6)
     return _save(fig, out / "best.png")
@@ -425,7 +424,7 @@ def write_report(spec: DesignSpec, study, rows: list[dict], figures: list[Path],
     if warned:
         lines += ["**Warnings:**", ""] + [f"- {w}" for w in warned] + [""]
     lines += [f"Base scenario `{spec.base}` with {len(spec.overrides)} override(s); mode `{spec.mode}`"
-              + (f", pair {spec.pair[0]} / {spec.pair[1]}" if spec.mode == "reciprocity" else "") + ".", "",
+              + study_mode(spec.mode).describe(spec) + ".", "",
               "| variable | range |", "| --- | --- |"]
     for v in spec.variables:
         rng = ", ".join(map(str, v.choices)) if v.choices is not None else \
@@ -512,14 +511,56 @@ def write_study_report(spec: DesignSpec, base_dir: Path, study, out: Path, rows:
     return [*figures, write_report(spec, study, rows, figures, out, modal)]
 
 
-def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None = None, workers: int = 2,
-                 scheduler: str | None = None, max_wall: float | None = None, progress=None, reporting=None,
-                 confirming=None) -> dict:
-    """`granel design`: run (or continue) the study (`design.run_design`, the design already
-    checked by `check_design`), then write its report (`write_study_report`). Returns
-    run_design's dict, the report's files added to its "files". `progress` and `confirming` as
-    run_design's; `reporting()` is called once the trials are done, before the report."""
-    from .design import run_design  # looked up when called: a test may stand in for the engine
+def plan_design(design_file: Path, out: Path):
+    """Check `granel design`'s design file and output folder before any computation: (the spec,
+    its folder, the unprepared `guard.outputs.OutputPlan` of --out). The folder is one a design
+    study writes (it holds study.journal) or new; the design's fields and that each variable
+    reaches the runs are checked (`design.check_design`): an invalid one raises a ScenarioError
+    naming `design_file` (exit 2), a probe that cannot write raises `NotWritten` (exit 4)."""
+    from ..guard.exits import NotWritten
+    from ..guard.outputs import OutputPlan
+    from .. import scenario as S
+    from .design import check_design, load_design
+    from .sweep import sweep_inputs
+
+    spec, base_dir = load_design(design_file)
+    plan = OutputPlan(inputs=[Path(design_file), *sweep_inputs(spec, base_dir)])
+    plan.folder(out, "--out", "design", recognise=lambda p: (p / "study.journal").exists())
+    for name in ("trials.nc", "best.toml", "report.md"):
+        plan.file(out / name, f"--out (its {name})")
+    plan.check()
+    try:
+        check_design(spec, base_dir)
+    except S.ScenarioError as e:
+        raise S.ScenarioError(f"{design_file}: {e}") from e
+    except OSError as e:
+        raise NotWritten("the study", out, e) from e
+    return spec, base_dir, plan
+
+
+def best_rows(spec: DesignSpec, res: dict) -> tuple[list[str], list[list[str]]]:
+    """The table `granel design` prints: (header, rows), one row per best trial of `res`
+    (`design_study`'s): its number, objective values and variables."""
+    header = ["trial", *[f"{o.name} ({o.sense})" for o in spec.objectives], *[v.field for v in spec.variables]]
+
+    def shown(v):
+        return f"{v:.5g}" if isinstance(v, float) else str(v)
+
+    rows = [[str(t.number), *[f"{v:.5g}" for v in t.values], *[shown(t.params[v.field]) for v in spec.variables]]
+            for t in res["best"]]
+    return header, rows
+
+
+def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None = None, options=None,
+                 reporting=None) -> dict:
+    """`granel design`: run (or continue) the study (`design_search.run_design` on the workers
+    of `options`, a `design_search.DesignRunOptions`; the design already checked by
+    `check_design`), then write its report (`write_study_report`). Returns run_design's dict,
+    the report's files added to its "files". `reporting()` is called once the trials are done,
+    before the report."""
+    from dataclasses import replace
+
+    from .design_search import DesignRunOptions, run_design  # looked up when called: a test may stand in for the engine
 
     held = {}
 
@@ -534,8 +575,8 @@ def design_study(spec: DesignSpec, base_dir: Path, out: Path, trials: int | None
         if best:
             held["rows"] = reevaluate(spec, base_dir, out, best, client)
 
-    res = run_design(spec, base_dir, out, trials, workers, scheduler, max_wall=max_wall, progress=progress, check=False,
-                     confirming=confirming, finishing=finishing)
+    options = replace(options or DesignRunOptions(), finishing=finishing)
+    res = run_design(spec, base_dir, out, trials, options, check=False)
     report_starts()
     res["files"] += write_study_report(spec, base_dir, res["study"], out, held.get("rows"))
     return res

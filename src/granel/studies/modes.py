@@ -10,19 +10,23 @@ stored result depends on. The sweep engine and the design search use a mode only
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from pathlib import Path
 from typing import ClassVar, Literal
 
 import numpy as np
 
 from .. import scenario as S
-from ..analysis.reciprocity import excitation_of, reciprocity_metrics, run_metrics
-from . import spectrum
+from ..analysis.reciprocity import excitation_of, input_energy, reciprocity_metrics, run_metrics
+from ..guard.exits import NotWritten
+from . import spectrum, spectrum_report
 from .spectrum import FREQUENCY_FIELD
 
 # a case's runs: (key, scenario), the key naming the run's file and its result
 Runs = list[tuple[str, S.Scenario]]
 
 SIZE_UNITS = {"granular_mass_kg": "kg", "footprint_m2": "m^2"}
+SETTINGS_TABLE = 'mode = "spectrum" needs a [spectrum] table (drive, measure, ...), and only that mode takes one'
+BAND = "frequencies: a design in spectrum mode needs its band's frequencies [Hz], and only that mode takes them"
 PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
 
 
@@ -58,6 +62,39 @@ class StudyMode(ABC):
     def check(self, spec, base: str, overrides: list[str], values: dict) -> None:
         """Fail before anything runs (ScenarioError naming the field) when the mode's settings
         do not fit a case's scenario (arguments as `scenarios`'); nothing to check by default."""
+
+    def check_settings(self, spec) -> None:
+        """ValueError when a study holds another mode's settings, or lacks its own: the
+        [spectrum] table belongs to spectrum mode alone."""
+        if spec.spectrum is not None:
+            raise ValueError(SETTINGS_TABLE)
+
+    def check_axes(self, fields: set[str]) -> None:
+        """ValueError when a sweep's axes (the fields they set) do not serve the mode."""
+
+    def check_band(self, frequencies) -> None:
+        """ValueError when a design's band of drive frequencies does not fit the mode: spectrum
+        mode alone takes one."""
+        if frequencies is not None:
+            raise ValueError(BAND)
+
+    def sweep_outputs(self, spec) -> tuple[str, ...]:
+        """The files a sweep in this mode writes beside its summary.nc."""
+        return ()
+
+    def finish_sweep(self, spec, summary, out_dir, case_list: list[dict]) -> None:
+        """Write `sweep_outputs` from the sweep's summary and its cases (`out_dir`/cases)."""
+
+    def energy_scale(self, ds) -> float:
+        """What a run's energies are divided by in a design's report: its input energy."""
+        return max(input_energy(ds), 1e-300)
+
+    energy_label: ClassVar[str] = "energy / input work"
+    energy_title: ClassVar[str] = "energy held (tighter accuracy)"
+
+    def describe(self, spec) -> str:
+        """What a report adds after the mode's name (the reciprocity mode's pair)."""
+        return ""
 
     def trial_cases(self, spec, case: dict) -> list[tuple[dict, str]]:
         """The cases a design's trial runs, each with the words that place a failure in it:
@@ -131,6 +168,9 @@ class ReciprocityMode(StudyMode):
     def metric_units(self, spec):
         return {**self.UNITS, **force_metric_units(self.keys(spec))}
 
+    def describe(self, spec):
+        return f", pair {spec.pair[0]} / {spec.pair[1]}"
+
     def measure(self, spec, scenarios, runs):
         fwd, bwd = self.keys(spec)
         m = reciprocity_metrics(runs[fwd], runs[bwd])
@@ -150,6 +190,35 @@ class SpectrumMode(StudyMode):
     its metrics are the band's (`spectrum.band_metrics`, the size, the band's largest peaks)."""
 
     name = "spectrum"
+    # a narrowband drive on a preloaded system does little work against the energy the preload
+    # stores: its report shows the energies in joules
+    energy_label = "energy held [J]"
+    energy_title = "energy held (tighter accuracy), first frequency"
+
+    def energy_scale(self, ds):
+        return 1.0
+
+    def check_settings(self, spec):
+        if spec.spectrum is None:
+            raise ValueError(SETTINGS_TABLE)
+
+    def check_axes(self, fields):
+        if FREQUENCY_FIELD not in fields:
+            raise ValueError(f"a spectrum needs an axis on {FREQUENCY_FIELD}")
+
+    def check_band(self, frequencies):
+        if frequencies is None:
+            raise ValueError(BAND)
+
+    def sweep_outputs(self, spec):
+        return ("spectrum.nc", "spectrum.png", "spectrum.md")
+
+    def finish_sweep(self, spec, summary, out_dir, case_list):
+        path = Path(out_dir) / "spectrum.nc"
+        try:
+            spectrum_report.write_spectrum(summary, spec.spectrum, path, *spectrum.stored_chain(spec, case_list, out_dir))
+        except OSError as e:
+            raise NotWritten("the spectrum", path, e) from e
 
     def scenarios(self, spec, base, overrides, values, check_usage=True):
         f = float(values[FREQUENCY_FIELD])

@@ -46,6 +46,11 @@ def scenario_modes(sc: S.Scenario, count: int, plot=None) -> ScenarioModes:
     and modes 1, 4 and 7) is drawn there, so at least 7 modes are computed."""
     from ..viz.plots import plot_modes  # lazy: matplotlib only for --plot
 
+    if count < 1:
+        raise S.ScenarioError(f"--count {count}: give a whole number of modes >= 1")
+    if sc.solid is None or sc.solid.kind in ("rigid", "none"):
+        raise S.ScenarioError(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or "
+                              "--solid beam")
     system, _, _ = S.build_granular(sc, sc.base)
     solid = S.build_solid(sc, system)
     want = max(count, CLASSIFIED if plot is not None else 0)
@@ -55,3 +60,10 @@ def scenario_modes(sc: S.Scenario, count: int, plot=None) -> ScenarioModes:
     if plot is not None:
         plot_modes(solid, modes, kinds, tuple(k for k in FIG6_MODES if k < modes.count), plot)
     return ScenarioModes(solid, modes, kinds, shown, None if plot is None else Path(plot))
+
+
+def mode_rows(res: ScenarioModes) -> tuple[str, list[str], list[list[str]]]:
+    """`granel modes`'s table: (title, header, rows)."""
+    model, periods = res.solid, res.modes.periods
+    return (f"{model.kind}: {model.ndof} DOFs, {model.nelements} elements", ["mode", "period [ms]", "frequency [kHz]", "kind"],
+            [[str(k + 1), f"{periods[k] * 1e3:.5f}", f"{1 / periods[k] / 1e3:.3f}", res.kinds[k]] for k in range(res.shown)])

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from .. import scenario as S
-from .claims import (CASES, SHOCKS, SIDES, SOLIDS, case_tag, claims, fig11_measures, measurements, summary_line,  # noqa: F401
-                     tally, verdict_flips)
+from .claims import CASES, case_tag, claims, fig11_measures, measurements, summary_line, tally, verdict_flips
 from ..io.results import read_netcdf, write_netcdf
 
 FREE_EDGE = ("media.0.outer_wall=false", "media.1.outer_wall=false")
@@ -285,10 +285,27 @@ def run_count(free_edge: bool = True) -> int:
     return len(CASES) + variants
 
 
-def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, progress=None, extra=(), frames=120,
-                free_edge=True, fig11_window=FIG11_WINDOW, workers=2) -> dict:
-    """Everything `granel paper` does; returns a summary dict. `extra` overrides every case's
-    scenario (e.g. a shorter duration for a smoke test)."""
+@dataclass(frozen=True)
+class PaperOptions:
+    """How `granel paper` runs: the solver of the cases ("fast" or "paper"), whether stored
+    validated runs are reused, the movies (and their frame count), the free-edge and no-outer-wall
+    variants of the claims, the window of Fig. 11 [s], the worker processes, and `extra`
+    overrides of every case's scenario (e.g. a shorter duration for a smoke test)."""
+
+    solver: str = "fast"
+    reuse: bool = True
+    animations: bool = True
+    extra: tuple = ()
+    frames: int = 120
+    free_edge: bool = True
+    fig11_window: float = FIG11_WINDOW
+    workers: int = 2
+
+
+def paper_study(out: str | Path, options: PaperOptions = PaperOptions(), progress=None) -> dict:
+    """Everything `granel paper` does, as `options` say; returns a summary dict."""
+    solver, reuse, extra, workers = options.solver, options.reuse, tuple(options.extra), options.workers
+    fig11_window = options.fig11_window
     from ..analysis.result_model import result_solid
     from ..solid.modal import classify_modes
     from ..solid.mode_cache import all_modes
@@ -315,7 +332,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
         progress("Fig. 11: paper's algorithm", how)
     m["fig11"] = fig11_measures(ds11, fig11_window) | {"source": how}
     m_free = m_variant = None
-    if free_edge:
+    if options.free_edge:
         runs_free, _ = run_cases(out, solver, reuse, progress, (*extra, *FREE_EDGE), subdir="runs-free-edge")
         m_free = measurements(runs_free) | {"modes": m["modes"], "fig11": m["fig11"]}
         runs_variant = dict(runs)
@@ -326,13 +343,14 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
                 if progress:
                     progress(case, "no SSGM outer wall")
         m_variant = measurements(runs_variant) | {"modes": m["modes"], "fig11": m["fig11"]}
-    figs = _figures(out, figdir, runs, model, modes, kinds, ds11, how, fig11_window)
+    figs = _figures(figdir, runs, model, modes, kinds, ds11, how, fig11_window)
     if progress:
         progress("figures", len(figs))
-    if animations:
+    if options.animations:
+        from ..run import load_result
         from ..viz.animate import render_movies
 
-        figs += render_movies(movie_jobs(out, frames), workers=workers)
+        figs += render_movies(movie_jobs(out, options.frames), workers=workers, read=load_result)
         if progress:
             progress("animations", len(CASES) * 2)
     total = time.perf_counter() - t0
@@ -348,7 +366,7 @@ def paper_study(out: str | Path, solver="fast", reuse=True, animations=True, pro
     return res
 
 
-def _figures(out, figdir, runs, model, modes, kinds, ds11, how, window) -> list:
+def _figures(figdir, runs, model, modes, kinds, ds11, how, window) -> list:
     from ..viz import figures as F
     from ..viz.plots import plot_modes
     from ..viz.schematics import fig1_geometry, fig2_meshes
@@ -367,3 +385,13 @@ def _figures(out, figdir, runs, model, modes, kinds, ds11, how, window) -> list:
     figs += F.fig10_friction_law(figdir / "fig10_friction_law")
     figs += F.fig11_eigenvalues(ds11, figdir / "fig11_eigenvalues", tmax=window, source=how)
     return figs
+
+
+def claim_rows(res: dict) -> list[list[str]]:
+    """`granel paper`'s table: each statement, the paper's value, granel's and the verdict (rich
+    markup colours it)."""
+    rows = []
+    for k, c in enumerate(res["claims"], 1):
+        color = {"agree": "green", "by construction": "cyan"}.get(c["verdict"], "yellow")
+        rows.append([str(k), c["claim"], c["paper"], c["granel"], f"[{color}]{c['verdict']}[/]"])
+    return rows

@@ -49,3 +49,32 @@ def run_reciprocity(scenarios: dict[str, S.Scenario], out: Path, running=None) -
     except OSError as e:
         raise NotWritten("the figure", out / "fig3_velocities.png", e) from e
     return runs, metrics
+
+
+def plan_reciprocity(out: Path, scenarios: dict[str, S.Scenario], source: str) -> None:
+    """The output folder of `granel reciprocity`, checked before any computation (its inputs:
+    the scenario `source` and the files it names; the disk for both runs) and then made."""
+    from ..guard.outputs import OutputPlan
+    from ..guard.owners import is_granel_file
+    from ..guard.resources import check_disk
+    from ..scenario.estimate import run_needs
+
+    first = next(iter(scenarios.values()))
+    plan = OutputPlan(inputs=[p for p in (S.scenario_file(source), *S.referenced_files(first)) if p is not None])
+    plan.folder(out, "--out", "reciprocity", recognise=lambda p: any(is_granel_file(f) for f in p.glob("shock-*.nc")))
+    plan.check()
+    check_disk(sum(run_needs(sc).result for sc in scenarios.values()), out, f"--out {out}: the two runs")
+    plan.prepare()
+
+
+def metric_rows(m: dict, a: str, b: str) -> tuple[list[str], list[list[str]]]:
+    """`granel reciprocity`'s table of `reciprocity_metrics` (forward: shock on b): (header, rows)."""
+    f, k = m["forward"], m["backward"]
+    rows = [("arrival at the measured granule [ms]", "arrival_measured_s", 1e3, ".4f"),
+            ("arrival at the solid [ms]", "arrival_solid_s", 1e3, ".4f"),
+            ("peak velocity toward the solid [m/s]", "peak_velocity_m_s", 1.0, ".4f"),
+            ("far-medium energy, peak [% input]", "energy_far_peak_frac", 100.0, ".2f"),
+            ("solid energy, peak [% input]", "solid_energy_peak_frac", 100.0, ".2f"),
+            ("solid spectral centroid [kHz]", "spectral_centroid_hz", 1e-3, ".2f")]
+    return (["metric", f"shock on {b}, measured at {a}", f"shock on {a}, measured at {b}"],
+            [[label, format(f[key] * s, fmt), format(k[key] * s, fmt)] for label, key, s, fmt in rows])

@@ -1,27 +1,10 @@
 """Local refinement after a global search: the `auto` sampler of a single-objective design whose
-variables are all continuous (`design.make_sampler`).
-
-A global sampler (TPE) finds the basin; on a flat objective it then lingers, its trials a few
-per cent from the answer. After the global phase (`global_trials`), each new trial is instead a
-step of a local model fitted to the finished trials, on the variables' search scale (each one's
-range, of its logarithm for a log variable, mapped onto [0, 1]):
-
-* a target objective (minimise |m / target - 1|) is a root-finding problem for the signed
-  misfit s = m / target - 1 (read from the trial's metrics): a linear fit of s over the n + 2
-  trials of smallest |s|, and the shortest step from the best of them to the fit's zero set (in
-  one variable the secant method; in several, a point of the nearest stretch of the curve or
-  surface of exact answers);
-* a direction objective (minimise or maximise m): a quadratic fit over the (n + 1)(n + 2) / 2
-  best trials, and the step to its minimiser (in one variable, successive parabolic
-  interpolation), or along its steepest descent where it is not convex.
-
-A step is at most twice the spread of the trials it was fitted on (the model is local) and
-stays in the range. Trials running on other workers are steps already taken: the next one
-moves a different distance along the same step. The refinement reads only the study's trials,
-so the same trials give the same step: a study on one worker with a seed is reproducible. It
-gives way to the global sampler (for that trial) when it has nothing to add: too few finished
-trials, a fit with no slope, a step shorter than `RESOLUTION` or onto a point already tried.
-"""
+variables are all continuous (`design_search.make_sampler`). After the global phase
+(`global_trials`), each trial is a step of a local model fitted to the finished trials on the
+variables' search scale: a linear fit of the signed misfit and the step to its zero set for a
+target objective, a quadratic fit and the step to its minimiser for a direction objective.
+docs/design.md ("Searches that land: the local refinement") describes the models, the steps and
+when the global sampler takes a trial back."""
 
 from __future__ import annotations
 

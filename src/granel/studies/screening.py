@@ -1,6 +1,6 @@
 """Multi-fidelity design studies: a design's `[screening]` (its trials at a looser accuracy),
 the order of the screened trials, and the confirmed ones (the best run again at the design's own
-accuracy by `design.confirm_best`, their values under the study's `confirmed` attribute)."""
+accuracy by `design_search.confirm_best`, their values under the study's `confirmed` attribute)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,8 @@
 """Parameter sweeps over any scenario field, run on dask.distributed (a LocalCluster by
 default, or an existing scheduler), with one NetCDF per run, resume, and a summary Dataset.
-
-Cases are the Cartesian product of a sweep file's axes (at most MAX_CASES; a zipped axis varies
-several fields together); a value "-" leaves its field as the base has it. What a case runs and
-measures is its mode's (`modes.StudyMode`: `run`, `reciprocity`, `spectrum`). A finished case
-leaves `cases/<tag>.json` (its metrics or its error) and one NetCDF per run. A rerun reuses a
-case's metrics only if it finished ok with the same fingerprint (`case_fingerprint`), and a run's
-NetCDF only if its scenario text and granel version match; failed cases are always rerun.
-docs/sweeps.md gives the sweep file."""
+Cases are the Cartesian product of a sweep file's axes (at most MAX_CASES); what a case runs and
+measures is its mode's (`modes.StudyMode`). docs/sweeps.md gives the sweep file and when a
+rerun reuses a case or a run."""
 
 from __future__ import annotations
 
@@ -24,19 +19,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .. import __version__
 from .. import scenario as S
-from ..guard.exits import NotWritten
 from ..io.results import ResultFileError
 from .modes import ModeName, study_mode
-from .spectrum import AMPLITUDE_FIELD, FREQUENCY_FIELD, SpectrumSpec, spectrum_chain, write_spectrum
+from .spectrum import SpectrumSpec
 
 # a sweep larger than this is refused at load (a mistyped count would otherwise build millions of cases)
 MAX_CASES = 100_000
-# the version of the metric definitions: bumped when one changes (2: arrivals relative to the
-# driven granule, `analysis.reciprocity.pulse_arrival`; 3: sizes and peak forces,
-# `modes.force_metrics`; 4: a chain's measured cut-off, `modes.chain_metrics`; 5: energy shares
-# of the dynamic input alone, NaN with a reason where nothing is dynamic, and the cut-off by modal
-# projection; 6: a spectrum run's wall_force, the cut-off of diatomic chains and chains on the
-# solid), so that cached results are recomputed
+# the version of the metric definitions, raised when one changes so that cached results are
+# recomputed (docs/sweeps.md, "Running", gives each version)
 METRIC_RULES = 6
 
 
@@ -140,9 +130,8 @@ class CaseSpec(BaseModel):
     spectrum: SpectrumSpec | None = None
 
     @model_validator(mode="after")
-    def _spectrum_table(self):
-        if (self.mode == "spectrum") != (self.spectrum is not None):
-            raise ValueError("mode = \"spectrum\" needs a [spectrum] table (drive, measure, ...), and only that mode takes one")
+    def _mode_settings(self):
+        study_mode(self.mode).check_settings(self)
         return self
 
     @classmethod
@@ -167,10 +156,7 @@ class SweepSpec(CaseSpec):
         dims = [a.dim for a in self.axes]
         if len(set(dims)) != len(dims):
             raise ValueError(f"axis names must be unique, got {dims}")
-        if self.mode == "spectrum":
-            fields = {f for a in self.axes for f in ([a.field] if a.zip is None else list(a.zip))}
-            if FREQUENCY_FIELD not in fields:
-                raise ValueError(f"a spectrum needs an axis on {FREQUENCY_FIELD}")
+        study_mode(self.mode).check_axes({f for a in self.axes for f in ([a.field] if a.zip is None else list(a.zip))})
         n = 1
         for a in self.axes:
             n *= a.size
@@ -226,14 +212,7 @@ def sweep_inputs(spec: CaseSpec, base_dir: Path) -> list[Path]:
     if base not in S.builtin_names():
         out.append(Path(base))
     folder = Path(base).parent if base not in S.builtin_names() else base_dir
-    names = []
-    try:
-        raw, _ = S.load_raw(base)
-        raw = S.apply_overrides(raw, list(spec.overrides))
-        names += [m.get("granules_file") for m in raw.get("media", []) if isinstance(m, dict)]
-        names += [e.get("file") for e in raw.get("excitations", []) if isinstance(e, dict)]
-    except S.ScenarioError:
-        pass  # the base's own errors are reported by check_base
+    names = S.referenced_names(base, spec.overrides)  # the base's own errors are reported by check_base
     for axis in getattr(spec, "axes", []) or []:
         fields = [axis.field] if axis.zip is None else list(axis.zip)
         for f in fields:
@@ -247,10 +226,11 @@ def check_base(spec: CaseSpec, base_dir: Path) -> None:
     cannot be applied; whether each case's scenario is valid is each case's business."""
     base = spec.base_path(base_dir)
     try:
-        raw, _ = S.load_raw(base)
-    except (OSError, UnicodeDecodeError) as e:
-        raise S.ScenarioError(f"sweep base {spec.base!r}: cannot read {base} ({e})") from None
-    S.apply_overrides(raw, list(spec.overrides))
+        S.check_source(base, spec.overrides)
+    except S.ScenarioError as e:
+        if str(e).startswith("cannot read"):
+            raise S.ScenarioError(f"sweep base {spec.base!r}: {e}") from None
+        raise
 
 
 def check_mode(spec: CaseSpec, base_dir: Path, case: dict) -> None:
@@ -496,15 +476,10 @@ def run_spec(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, schedul
 def sweep_study(spec: SweepSpec, base_dir: Path, out_dir, workers: int = 2, scheduler: str | None = None,
                 progress=None) -> xr.Dataset:
     """`granel sweep`: every case of `spec` (`run_spec`, which writes out_dir/summary.nc) and, in
-    spectrum mode, the spectrum beside the summary (`spectrum.write_spectrum`: spectrum.nc, .png
+    spectrum mode, the spectrum beside the summary (`spectrum_report.write_spectrum`: spectrum.nc, .png
     and .md). Returns the summary; a failed write of the spectrum is `guard.exits.NotWritten`."""
     ds = run_spec(spec, base_dir, out_dir, workers, scheduler, progress)
-    if spec.mode == "spectrum":
-        path = Path(out_dir) / "spectrum.nc"
-        try:
-            write_spectrum(ds, spec.spectrum, path, *stored_chain(spec, out_dir))
-        except OSError as e:
-            raise NotWritten("the spectrum", path, e) from e
+    study_mode(spec.mode).finish_sweep(spec, ds, out_dir, cases(spec))
     return ds
 
 
@@ -596,60 +571,24 @@ def plot_map(summary: xr.Dataset, output, metric: str = "nonreciprocity_index", 
     return save(fig, output)
 
 
-# ---------------------------------------------------------------- the `granel spectrum` study
+def plan_sweep(sweep_file: Path, spec: SweepSpec, base_dir: Path, out: Path) -> None:
+    """`granel sweep`'s outputs (the folder, its summary.nc and the mode's `sweep_outputs`),
+    checked before any computation and made."""
+    from ..guard.outputs import OutputPlan
+    from ..guard.owners import is_granel_file
 
-def spectrum_sweep(scenario: str, overrides, frequencies, amplitudes, **settings):
-    """The sweep behind `granel spectrum`: `scenario` (a built-in name, or a file, then given by
-    its absolute path) with `overrides`, in spectrum mode with `settings` (`SpectrumSpec`'s
-    fields), over its first excitation's frequencies x amplitudes. pydantic's ValidationError for
-    invalid settings."""
-    builtin = scenario in S.builtin_names()
-    return SweepSpec.model_validate({
-        "name": f"spectrum of {scenario if builtin else Path(scenario).stem}",
-        "base": scenario if builtin else str(Path(scenario).resolve()), "overrides": list(overrides), "mode": "spectrum",
-        "spectrum": settings,
-        "axes": [{"field": FREQUENCY_FIELD, "values": list(frequencies)},
-                 {"field": AMPLITUDE_FIELD, "values": list(amplitudes)}]})
+    plan = OutputPlan(inputs=[sweep_file, *sweep_inputs(spec, base_dir)])
+    plan.folder(out, "--out", "sweep", recognise=lambda p: (p / "cases").is_dir() or is_granel_file(p / "summary.nc"))
+    for name in ("summary.nc", *study_mode(spec.mode).sweep_outputs(spec)):
+        plan.file(out / name, f"--out (its {name})")
+    plan.check().prepare()
 
 
-def stored_chain(spec: SweepSpec, out_dir) -> tuple[Any, str]:
-    """(The linearised chain of a spectrum's runs, `spectrum.spectrum_chain`, or None; why there
-    is none): read from the first stored forward run, in `out_dir`/cases, of a case at the first
-    value of every axis besides frequency and amplitude (the axes the report reads)."""
-    from ..analysis.chain import ChainError
-    from ..io.results import read_netcdf
-
-    free = {a.dim for a in spec.axes if a.field in (FREQUENCY_FIELD, AMPLITUDE_FIELD)}
-    dims = [a.dim for a in spec.axes]
-    for case in cases(spec):
-        if any(i != 0 for d, i in zip(dims, case["index"]) if d not in free):
-            continue
-        path = Path(out_dir) / "cases" / f"{case['tag']}__fwd.nc"
-        if not path.exists():
-            continue
-        try:
-            run = read_netcdf(path)
-            return spectrum_chain(run, spec.spectrum), ""
-        except ChainError as e:
-            return None, str(e)
-        except (ResultFileError, OSError, ValueError, KeyError):
-            continue  # unreadable, or of an earlier granel: try the next case's
-    return None, "no stored run of the spectrum to read its chain from"
-
-
-def cases_folder(path):
-    """Where `run_spectrum` keeps the runs of the spectrum written to `path`: PATH with .cases."""
-    return Path(path).with_suffix(".cases")
-
-
-def run_spectrum(spec, path, workers: int = 2, scheduler: str | None = None, progress=None) -> xr.Dataset:
-    """Run every case of the spectrum sweep `spec` (`run_spec`, its files relative to the
-    working folder; finished runs in `cases_folder(path)` are reused), then write the spectrum
-    (`write_spectrum`: PATH, its .png and .md) and return it. `progress(case result)` after each
-    case. A failed write of the spectrum is `guard.exits.NotWritten`; an OSError of the runs'
-    folder passes as it is."""
-    summary = run_spec(spec, Path("."), cases_folder(path), workers, scheduler, progress)
-    try:
-        return write_spectrum(summary, spec.spectrum, path, *stored_chain(spec, cases_folder(path)))
-    except OSError as e:
-        raise NotWritten("the spectrum", path, e) from e
+def summary_statistics(ds: xr.Dataset) -> list[list[str]]:
+    """Each metric of a sweep's summary with a finite value: [name, min, median, max]."""
+    rows = []
+    for m in (v for v in ds.data_vars if v != "status"):
+        v = ds[m].values
+        if np.isfinite(v).any():
+            rows.append([m, f"{np.nanmin(v):.4g}", f"{np.nanmedian(v):.4g}", f"{np.nanmax(v):.4g}"])
+    return rows

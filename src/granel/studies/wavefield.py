@@ -296,7 +296,7 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
     """The wavefield of result `ds` (`read_wavefield_result`) into folder `out`: FILES, and MOVIE
     with `options.movie`. progress(what, done, total) before each stage (`stage_count`)."""
     from ..analysis.result_model import result_modes
-    from ..analysis.wavefield import analyse_wavefield
+    from ..analysis.wavefield import WavefieldSettings, analyse_wavefield
     from ..guard.writing import save_figure, storable
     from ..io.results import write_netcdf
     from ..viz import wavefield as V
@@ -312,7 +312,8 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
     say("the solid and its modes")
     plan = plan or plan_wavefield(ds, options, name)
     modes = result_modes(ds, name) if "solid_eta" in ds else None
-    wf = analyse_wavefield(ds, plan.model, modes, plan.bands, plan.k_max, options.fit, progress=say, name=name)
+    settings = WavefieldSettings(bands=plan.bands, k_max=plan.k_max, fit=options.fit)
+    wf = analyse_wavefield(ds, plan.model, modes, settings, progress=say, name=name)
     top = float(np.finfo(np.float32).max)  # wavefield.nc holds these in float32 (`wavefield_dataset`)
     held = [("E(k, t)", wf.spectrum.energy_line), ("the band fields' energy", wf.band_density),
             ("the map", wf.fk.power)]
@@ -331,7 +332,7 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
         say(file)
         files.append(save_figure(figure(wf, title=f"{title}: {FIGURE_TITLES[file]}"), out / file, dpi=110))
     if options.movie:
-        from ..viz.animate import write_movie
+        from ..viz.encoding import write_movie
 
         say(MOVIE)
         files.append(write_movie(lambda: V.band_movie_frames(wf, options.frames), out / MOVIE, options.fps))
@@ -344,3 +345,47 @@ def wavefield_study(ds, out: Path, options: WavefieldOptions = WavefieldOptions(
 
 FIGURE_TITLES = {"kt.png": "kinetic energy over wavenumber and time", "fk.png": "frequency-wavenumber map",
                  "moments.png": "moments of the spectrum", "bands.png": "band-filtered fields"}
+
+
+@dataclass(frozen=True)
+class WavefieldRequest:
+    """What `granel wavefield` was asked, checked: the result read, its options and their plan."""
+
+    ds: object
+    options: WavefieldOptions
+    plan: WavefieldPlan
+
+
+def wavefield_request(result: Path, out: Path, bands: str | None, k_max, fit: str | None, movie: bool, frames: int,
+                      fps: int) -> WavefieldRequest:
+    """`granel wavefield`'s options and files, checked before any computation (InputError or
+    ResultFileError naming the option or the file), and its output folder made."""
+    from ..guard.exits import option_value
+    from ..guard.outputs import OutputPlan
+    from ..guard.reading import check_file
+
+    band_spec = option_value("--bands", bands, parse_bands)
+    window = option_value("--fit", fit, parse_window)
+    options = WavefieldOptions(band_spec, k_max, window, movie, frames, fps)
+    check_options(options)
+    check_file(result, "result file")
+    plan = OutputPlan(inputs=[result])
+    plan.folder(out, "-o", "wavefield", recognise=lambda p: (p / "wavefield.nc").exists())
+    for name in FILES + ((MOVIE,) if movie else ()):
+        plan.file(out / name, f"-o (its {name})")
+    plan.check()
+    ds = read_wavefield_result(result)
+    settled = plan_wavefield(ds, options, result)
+    plan.prepare()
+    return WavefieldRequest(ds, options, settled)
+
+
+def report_rows(report: WavefieldReport) -> list[tuple[str, str]]:
+    """`granel wavefield`'s table of a `WavefieldReport`: (label, value) rows."""
+    return [("variance growth exponent", f"kinetic {report.exponent:.3f} +- {report.stderr:.3f}, modal "
+                                         f"{report.modal_exponent:.3f} +- {report.modal_stderr:.3f} (fit over "
+                                         f"{report.fit[0] * 1e3:.4f}-{report.fit[1] * 1e3:.4f} ms)"),
+            ("entropy at the end", f"{report.entropy_end:.3f} nats"),
+            ("wavenumbers analysed", f"k <= {report.k_max:.1f} rad/m (elements resolve {report.k_resolved:.1f})"),
+            ("ridges on the map", f"{report.ridges} (k >= {report.k_window:.1f} rad/m)"),
+            ("time", f"{report.seconds:.2f} s")]

@@ -1,5 +1,5 @@
 """Pictures of results and scenarios: the paper's figures, plots, schematics, movies, and exports
-for ParaView and OVITO. A result's pictures read the model it carries (`analysis.result_model`);
-`run` is imported only to draw a scenario (`run.built_models`, in schematics and plots) and to
-read a result file (`run.load_result`, which gives a result of an earlier granel its model record).
-May import: analysis, run, solid, granular, io, guard."""
+for ParaView and OVITO. A result's pictures read the model it carries (`analysis.result_model`),
+from a Dataset their caller read (`run.load_result` upgrades a result of an earlier granel) or
+from a file read by `io.model.read_result`; a scenario's drawings build it (`scenario.built_models`).
+May import: analysis, scenario, solid, granular, io, guard."""

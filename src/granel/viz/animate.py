@@ -1,26 +1,13 @@
-"""Animations (Appendix C): magnified deformation or normalised energy density, eq. (14), as MP4
-(imageio-ffmpeg) with a GIF fallback.
-
-A movie is rendered in three stages:
-
-1. `plan_frames` computes everything each frame shows, up front and vectorised where it can be:
-   the solid's reduced state at every frame time at once (q = Phi eta as one matrix product for
-   modal results, or the stored q for results of the paper's solver), the magnified granule and
-   mesh positions, and for eq. (14) the energy densities of granules and solid elements, with one
-   granular `Stepper` whose neighbour list is rebuilt only when granules have moved.
-2. `MovieFigure` builds the figure and its artists once (granules as one circle collection, the
-   plate as one polygon collection, the beam as a line or a quad mesh, the title) and only updates
-   their data from frame to frame.
-3. `animate` streams the frames straight to the encoder; `render_movies` renders many movies in
-   parallel worker processes.
-"""
+"""Animations (Appendix C): the magnified deformation or the normalised energy density of
+eq. (14), as MP4 with a GIF fallback (`viz.encoding`). `plan_frames` computes what every frame
+shows, `MovieFigure` draws it, `animate` renders one movie and `render_movies` many in parallel
+processes. docs/analysis.md ("Figures and movies") describes the stages."""
 
 from __future__ import annotations
 
 import time
-import tomllib
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field as dc_field
 from pathlib import Path
 
@@ -33,7 +20,10 @@ import numpy as np  # noqa: E402
 from ..analysis.density import granule_energies, granule_energy_density, granule_states  # noqa: E402
 from ..analysis.result_model import result_modes, result_solid, result_system  # noqa: E402
 from .plots import Q8_OUTLINE  # noqa: E402
+from ..io.model import read_record, read_result  # noqa: E402
 from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
+from ..granular.loads import load_history  # noqa: E402
+from .encoding import write_movie  # noqa: E402
 
 # the paper's magnification of the deformation movies (Appendix C)
 MAGNIFICATION = {"weak": 5000.0, "moderate": 1000.0, "strong": 200.0}
@@ -41,17 +31,17 @@ FIELDS = ("deformation", "energy-density")
 # colour scale of the energy-density movies: w / w0 of eq. (14) on a log scale
 W_MIN, W_MAX = 1e-6, 1.0
 CMAP = "inferno"
-# x264 speed preset, faster than the default 'medium' at the same constant quality (quality=7,
-# CRF 15) for a slightly larger file (docs/performance.md)
-X264_PRESET = "veryfast"
 # the largest frame rate a movie may ask for (a GIF shows at most 100 frames per second)
 MAX_FPS = 1000
 
 
 def default_magnification(ds) -> float:
-    e = tomllib.loads(ds.attrs["scenario"]).get("excitations", [{}])[0]
-    if e.get("shock") in MAGNIFICATION:
-        return MAGNIFICATION[e["shock"]]
+    """The deformation movies' magnification: the paper's for its shock levels (the first load's
+    `shock_level`), else 3 mm over the largest displacement of a granule."""
+    loads = read_record(ds).loads
+    level = load_history(loads[0].kind, loads[0].params, loads[0].times, loads[0].values).shock_level if loads else None
+    if level in MAGNIFICATION:
+        return MAGNIFICATION[level]
     disp = np.hypot(ds["x"].values - ds["x"].values[0], ds["y"].values - ds["y"].values[0]).max()
     return float(0.003 / disp) if disp > 0 else 1.0
 
@@ -83,14 +73,6 @@ def check_movie_options(max_frames=120, fps=20, magnification=None) -> None:
 
 # what a movie reads from a result (besides its model record and the scenario text in its attributes)
 RESULT_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
-
-
-def read_result(path) -> "xr.Dataset":
-    """A run's result file, read and checked (`run.load_result`, which also gives a result of an
-    earlier granel its model record); ResultFileError naming the file."""
-    from ..run import load_result
-
-    return load_result(path)
 
 
 def check_result(ds, name="result") -> None:
@@ -353,107 +335,7 @@ def iter_frames(plan: FramePlan) -> Iterator[np.ndarray]:
 
 
 # --------------------------------------------------------------------------------------------
-# 3. encoding
-
-
-def _movie_mark() -> str:
-    from .. import __version__
-    from ..guard.owners import MARK
-
-    return f"{MARK} {__version__}"
-
-
-MOVIE_MARK = _movie_mark()
-
-
-class _EncoderFailed(Exception):
-    """The MP4 encoder (not the rendering) failed."""
-
-
-def _stream_mp4(out: Path, frames: Iterator[np.ndarray], fps: int) -> None:
-    import imageio.v2 as imageio
-
-    try:
-        w = imageio.get_writer(out, fps=fps, codec="libx264", quality=7, macro_block_size=16, ffmpeg_log_level="quiet",
-                               output_params=["-preset", X264_PRESET, "-metadata", f"comment={MOVIE_MARK}"])
-    except Exception as e:  # noqa: BLE001 - no ffmpeg, no libx264, ...
-        raise _EncoderFailed(str(e)) from e
-    try:
-        for f in frames:  # an error while rendering propagates as itself
-            try:
-                w.append_data(f)
-            except Exception as e:  # noqa: BLE001
-                raise _EncoderFailed(str(e)) from e
-    except BaseException:
-        try:
-            w.close()
-        except Exception:  # noqa: BLE001 - the first error is the one to report
-            pass
-        raise
-    try:
-        w.close()
-    except Exception as e:  # noqa: BLE001
-        raise _EncoderFailed(str(e)) from e
-
-
-def _mp4_complete(path: Path) -> bool:
-    """Whether an MP4 file holds its index (the moov box, which ffmpeg writes last)."""
-    try:
-        size = path.stat().st_size
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 16)
-            fh.seek(max(0, size - (1 << 20)))
-            tail = fh.read()
-    except OSError:
-        return False
-    return b"moov" in head or b"moov" in tail
-
-
-def write_movie(frames: Callable[[], Iterator[np.ndarray]] | Sequence[np.ndarray], out, fps: int) -> Path:
-    """Stream frames to an MP4 through imageio-ffmpeg (libx264); a GIF next to it if the encoder
-    fails (or if `out` ends in .gif). `frames` is an iterable of RGB arrays or, so that a failed
-    MP4 can be re-rendered as GIF without keeping the frames, a callable returning a fresh iterator.
-    Each file is written atomically with granel's mark (`guard.writing.atomic_path`); a full disk
-    is an error (exit 4), not a reason to try a GIF; a GIF is never written over a file granel did
-    not write."""
-    import imageio.v2 as imageio
-
-    from ..guard.exits import FileError, is_no_space
-    from ..guard.owners import is_granel_file
-    from ..guard.writing import atomic_path
-
-    make = frames if callable(frames) else (lambda: iter(frames))
-    out = Path(out)
-    if out.suffix.lower() != ".gif":
-        try:
-            with atomic_path(out, keep_suffix=True) as tmp:
-                _stream_mp4(Path(tmp), make(), fps)
-                if not _mp4_complete(Path(tmp)):  # ffmpeg reports a failed trailer (a full disk) only on its stderr
-                    import shutil
-
-                    free = shutil.disk_usage(Path(tmp).parent).free
-                    why = "no space left on the device" if free < 1 << 20 else "the encoder ended without its index"
-                    raise _EncoderFailed(why)
-            return out
-        except _EncoderFailed as e:
-            if is_no_space(e) or is_no_space(e.__cause__ or e):
-                raise FileError(f"{out}: no space left on the device; nothing was written there") from None
-            gif = out.with_suffix(".gif")
-            if gif.exists() and not is_granel_file(gif):
-                raise FileError(f"{out}: the MP4 encoder failed ({e}), and the GIF in its place, {gif}, exists and was "
-                                "not written by granel") from None
-            out = gif
-    import io
-
-    from ..guard.writing import write_bytes
-
-    buffer = io.BytesIO()  # encoded in memory: the disk sees one plain, atomic write
-    with imageio.get_writer(buffer, format="GIF", mode="I", duration=1000.0 / fps, loop=0,
-                            comment=MOVIE_MARK.encode()) as w:
-        for f in make():
-            w.append_data(f)
-    write_bytes(out, buffer.getvalue())
-    return out
+# 3. one movie
 
 
 def animate(ds, out, field: str = "deformation", magnification: float | None = None, max_frames: int = 120,
@@ -516,11 +398,11 @@ class MovieError(RuntimeError):
         super().__init__("\n".join(lines))
 
 
-def _render_group(jobs: list[MovieJob]) -> list[tuple[bool, str, float]]:
-    """Render jobs sharing one result file (read once): [(ok, path or error text, seconds)]."""
+def _render_group(jobs: list[MovieJob], read=read_result) -> list[tuple[bool, str, float]]:
+    """Render jobs sharing one result file (read once by `read`): [(ok, path or error text, seconds)]."""
     res = []
     try:
-        ds = read_result(jobs[0].result)
+        ds = read(jobs[0].result)
     except Exception as e:  # noqa: BLE001 - reported per job
         msg = f"{jobs[0].result}: cannot read: {type(e).__name__}: {e}"
         return [(False, f"{j.out.name}: {msg}", 0.0) for j in jobs]
@@ -535,7 +417,7 @@ def _render_group(jobs: list[MovieJob]) -> list[tuple[bool, str, float]]:
     return res
 
 
-def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | None = None) -> list[Path]:
+def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | None = None, read=read_result) -> list[Path]:
     """Render many Appendix C movies (the magnified deformation or the energy density of eq. 14;
     e.g. the 24 of `granel paper`) and return their paths in job order.
 
@@ -545,7 +427,8 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
     'spawn' context (numba and forked threads do not mix: a script calling this must guard its entry
     point with `if __name__ == "__main__":`); workers = 1 renders in this process. progress(path) is
     called as each movie is written. A failed movie does not stop the others; MovieError then names
-    every failed output with its error."""
+    every failed output with its error. `read(path)` reads a result (`io.model.read_result`;
+    `run.load_result` for results of an earlier granel)."""
     jobs = [MovieJob.of(j) for j in jobs]
     for j in jobs:
         try:
@@ -577,7 +460,7 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
 
     if workers <= 1 or len(tasks) == 1:
         for t in tasks:
-            done(t, _render_group([jobs[k] for k in t]))
+            done(t, _render_group([jobs[k] for k in t], read))
     else:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -586,7 +469,7 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
 
         with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=mp.get_context("spawn"),
                                  initializer=pool_initializer) as ex:
-            futures = {ex.submit(_render_group, [jobs[k] for k in t]): t for t in tasks}
+            futures = {ex.submit(_render_group, [jobs[k] for k in t], read): t for t in tasks}
             for fu in as_completed(futures):
                 t = futures[fu]
                 try:
@@ -601,4 +484,20 @@ def render_movies(jobs, workers: int = 2, progress: Callable[[Path], None] | Non
 
 __all__ = ["MAGNIFICATION", "FIELDS", "FramePlan", "MovieFigure", "MovieJob", "MovieError", "ResultFileError", "animate",
            "check_movie_options", "check_result", "default_magnification", "frame_indices", "granule_energies", "iter_frames",
-           "plan_frames", "read_result", "render_movies", "solid_states", "write_movie"]
+           "plan_frames", "render_movies", "solid_states"]
+
+
+def check_movie_request(output: Path, field: str, magnification, frames: int, fps: int) -> None:
+    """`granel animate`'s options, before anything is read: InputError naming the option."""
+    from ..guard.exits import InputError
+
+    if frames < 1:
+        raise InputError(f"--frames {frames}: give a whole number of frames >= 1")
+    if not 1 <= fps <= MAX_FPS:
+        raise InputError(f"--fps {fps}: give a whole number of frames per second from 1 to {MAX_FPS}")
+    if magnification is not None and not (np.isfinite(magnification) and magnification > 0):
+        raise InputError(f"--magnification {magnification}: give a finite number > 0")
+    if field not in FIELDS:
+        raise InputError(f"--field {field!r}: choose deformation or energy-density")
+    if Path(output).suffix.lower() not in (".mp4", ".gif"):
+        raise InputError(f"--output {output}: give a .mp4 or .gif file name")

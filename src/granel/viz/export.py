@@ -1,35 +1,7 @@
-"""Export a run's result (the NetCDF file of `granel run`) for ParaView, OVITO and spreadsheets.
-
-Formats (any combination):
-
-* ``vtk``: the granules as one VTU point cloud per output (``granules/granules_NNNNNN.vtu``) with
-  the time series ``granules.pvd`` (radius, velocity, omega and kinetic energy as point data: show
-  them as sphere glyphs scaled by radius); a plate or beam as one VTU per stored solid output
-  (``solid/solid_NNNNNN.vtu``, Q8 quadrilaterals or the beam's centre line) with ``solid.pvd``:
-  nodal displacement and velocity as point data, element energy density and stress as cell data.
-* ``xdmf``: the same through meshio's XDMF time series (``granules.xdmf``, ``solid.xdmf``, each
-  with its ``.h5``). Its mesh is fixed, so the granules' points are their initial centres, and
-  their centres at each output are the point data ``position`` (and ``displacement``).
-* ``extxyz``: ``granules.extxyz``, one extended-XYZ frame per output (for OVITO).
-* ``csv``: ``traces.csv`` (long format: time, granule, x, y, v_x, v_y, omega), ``walls.csv``
-  (time, wall, normal, tangential), ``contacts.csv`` (time, contact, normal, tangential) and
-  ``energies.csv`` (time and the energy-ledger variables that have only the time dimension).
-
-Each file appears whole: it is written into a hidden staging folder (which the next export
-removes, whatever killed this one), synced and moved into place. The output folder is granel's
-own (`guard.outputs`): files of the same names are replaced, nothing else is touched. The solid's
-fields are rebuilt as the movies rebuild them, from the result's model record
-(`analysis.result_model.result_solid`, `animate.solid_states`).
-
-Stress (cell data, Pa; `solid_stress`, from the E and nu of the solid's recorded recipe):
-
-* plate: ``stress_xx``, ``stress_yy``, ``stress_xy``, the plane-stress law of eq. (7)
-  (`solid.plate.plane_stress_law`) averaged over each Q8 element (area-weighted over its 3 x 3
-  Gauss points), and ``von_mises``, sqrt(sxx^2 - sxx syy + syy^2 + 3 sxy^2) of those means. The
-  two elements a rigid layer holds are ordinary Q8 cells, their outer side moving rigidly.
-* beam: ``bending_stress``, the outer-fibre stress E (h/2) |w''| at each element's centre (eq. 9;
-  h the section's depth, the solid's width). The beam is axially rigid: no axial stress.
-* rigid solid or no solid: no solid files, no stress."""
+"""Export a run's result (the NetCDF file of `granel run`) for ParaView, OVITO and spreadsheets:
+VTK (VTU files with PVD time series), XDMF, extended XYZ and CSV (`FORMATS`), with the solid's
+element stress from the plane-stress law of eq. (7) (plate) or the bending of eq. (9) (beam).
+docs/analysis.md ("Exports") lists the files and their fields."""
 
 from __future__ import annotations
 
@@ -79,18 +51,6 @@ def parse_formats(values: Iterable[str] | None) -> list[str]:
     return [f for f in FORMATS if f in asked]
 
 
-def read_export_result(path) -> "xr.Dataset":
-    """A run's result, checked (`run.load_result`); ExportError naming the file, with the
-    reader's code (4: not readable as NetCDF, 2: not a result or damaged)."""
-    from ..io.results import ResultFileError
-    from ..run import load_result
-
-    try:
-        return load_result(path)
-    except ResultFileError as e:
-        raise ExportError(str(e), e.code) from None
-
-
 # --------------------------------------------------------------------------------------------
 # what is exported
 
@@ -132,7 +92,7 @@ def elastic_constants(model) -> tuple[float, float]:
 
 def plate_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
     """The plate's element-mean plane-stress Cauchy stress and von Mises stress [Pa], (ne,) each,
-    from the full nodal DOF vector x (= T q, scikit-fem's DOF order; see the module docstring).
+    from the full nodal DOF vector x (= T q, scikit-fem's DOF order).
     Reuses the plate's basis (Q8 shape-function gradients at its Gauss points) and the plate's
     own plane-stress law (`solid.plate.plane_stress_law`, eq. 7)."""
     from skfem.helpers import sym_grad
@@ -234,7 +194,7 @@ def _pvd(path: Path, entries: list[tuple[float, str]]) -> None:
     lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
     lines += [f'    <DataSet timestep="{_fmt(t)}" group="" part="0" file="{name}"/>' for t, name in entries]
     lines += ["  </Collection>", "</VTKFile>", ""]
-    path.write_text("\n".join(lines))
+    path.write_text("\n".join(lines), encoding="utf-8")
 
 
 def _vtu_series(stage: Path, name: str, frames, tick: Callable[[], None]) -> list[str]:
@@ -274,16 +234,25 @@ def write_vtk(ds, system, model, elastic: tuple[float, float], stage: Path, tick
 
 def _time_series_writer(path: Path):
     """meshio's XDMF TimeSeriesWriter with its HDF5 file beside the .xdmf file (meshio 5.3 opens
-    it in the current folder)."""
+    it in the current folder), built in memory and written in one plain write: HDF5 never meets
+    a full disk or a file-size limit, whose failures it reports only as it is collected."""
     from meshio.xdmf import TimeSeriesWriter
 
     class Writer(TimeSeriesWriter):
         def __enter__(self):
+            import io
+
             import h5py
 
             self.h5_filename = str(self.filename.with_suffix(".h5"))
-            self.h5_file = h5py.File(self.h5_filename, "w")
+            self.h5_buffer = io.BytesIO()
+            self.h5_file = h5py.File(self.h5_buffer, "w")
             return self
+
+        def __exit__(self, *exc):
+            super().__exit__(*exc)  # the .xdmf file, and the HDF5 image closed
+            with open(self.h5_filename, "wb") as fh:
+                fh.write(self.h5_buffer.getbuffer())
 
     return Writer(path)
 
@@ -313,7 +282,7 @@ def write_xdmf(ds, system, model, elastic: tuple[float, float], stage: Path, tic
 def write_extxyz(ds, system, stage: Path, tick: Callable[[], None]) -> list[str]:
     species = [str(m) for m in ds["medium"].values] if "medium" in ds.coords else [lab.split(":")[0] for lab in system.labels]
     n = system.n
-    with open(stage / "granules.extxyz", "w") as f:
+    with open(stage / "granules.extxyz", "w", encoding="utf-8") as f:
         for k, t in enumerate(ds["time"].values.astype(float)):
             g = granule_frame(ds, system, k)
             f.write(f"{n}\nProperties={EXTXYZ_PROPERTIES} Time={_fmt(t)} pbc=\"F F F\"\n")
@@ -332,7 +301,7 @@ def _long_csv(path: Path, ds, key: str, names: list[str], columns: list[str]) ->
     times = ds["time"].values.astype(float)
     labels = [str(s) for s in ds[key].values] if key in ds.coords else []
     present = [n in ds for n in names]
-    with open(path, "w", newline="") as f:
+    with open(path, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
         out.writerow(["time", key, *columns])
         if not labels or not all(present):
@@ -362,7 +331,7 @@ def write_csv(ds, stage: Path, tick: Callable[[], None]) -> list[str]:
     tick()
     names = ledger_names(ds)
     data = [ds[n].values.astype(float) for n in names]
-    with open(stage / "energies.csv", "w", newline="") as f:
+    with open(stage / "energies.csv", "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
         out.writerow(["time", *names])
         for k, t in enumerate(ds["time"].values.astype(float)):
@@ -423,3 +392,17 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS,
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     return written
+
+
+def plan_export(result: Path, out: Path, ds=None):
+    """`granel export`'s output folder, checked against its input `result` (a readable file);
+    made once `ds` (the result, read) is given. Exit 2 or 4 naming the option or the file."""
+    from ..guard.outputs import OutputPlan
+    from ..guard.reading import check_file
+
+    check_file(result, "result file")
+    plan = OutputPlan(inputs=[result])
+    plan.folder(out, "-o", "export", recognise=lambda p: any(p.glob("*.pvd")) or (p / "traces.csv").exists())
+    plan.check()
+    if ds is not None:
+        plan.prepare()

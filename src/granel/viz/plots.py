@@ -11,6 +11,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
+from ..scenario.build import built_models  # noqa: E402
+
 Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
 
 
@@ -23,8 +25,6 @@ def save(fig, path: str | Path, dpi: int = 200) -> Path:
 
 def plot_geometry(sc, output: str | Path, ax=None):
     """The packing with labels, walls, the solid, the solid contact points and excitations."""
-    from ..run import built_models
-
     system = built_models(sc)[0]
     own = ax is None
     if own:

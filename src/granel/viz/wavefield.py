@@ -2,7 +2,7 @@
 time, the frequency-wavenumber map with the analytic branches and its ridges, the spectrum's
 centroid, variance (with its fitted growth law) and entropy over time, snapshots of the
 band-filtered fields, and the frames of their movie. Each function returns a matplotlib figure
-(or frames); the caller saves it (`guard.writing.save_figure`, `viz.animate.write_movie`)."""
+(or frames); the caller saves it (`guard.writing.save_figure`, `viz.encoding.write_movie`)."""
 
 from __future__ import annotations
 

@@ -6,11 +6,9 @@ with the convergence test (A4) per component."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from ...granular.kernels import friction_rate, interface_forces, rhs, rk4_step
+from ...granular.kernels import friction_rate, friction_substeps, interface_forces, rhs, rk4_step
 from ...guard.jit import njit
 from ...solid.propagation import basis_values
 from .. import core
@@ -75,7 +73,7 @@ def rk4_with_estimate(state, t, h, model, motion, rate, granular):
     stage being the state's derivative (first same as last), the end derivative in
     granular.dy_end and the embedded third-order error h/6 (k4 - k5) summed over sub-steps in
     granular.err. False if the state stops being finite."""
-    m = max(1, int(math.ceil(rate * h / 2.0)))
+    m = friction_substeps(rate, h)
     s = h / m
     core.copy1(granular.y, state.y)
     granular.err[:] = 0.0
@@ -174,7 +172,7 @@ def interface_solve(state, t, h, model, solid, cache, slot, cfg, work):
     for c in range(nc):
         mo.u0[c, 0] = state.u[2 * c]
         mo.u0[c, 1] = state.u[2 * c + 1]
-    rate = 1.5 * friction_rate(state.y, model, mo)
+    rate = friction_rate(state.y, model, mo)
     trial.rate = rate
     gr = model.granules
     for c in range(nc):

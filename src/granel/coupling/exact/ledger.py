@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from ...granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK
+from ...granular.bundles import ACC_FRIC, ACC_VISC, ACC_WORK, ledger_offset, spin_offset, velocity_offset
+from ...granular.contact import hertz_force
 from ...granular.kernels import load_value, overlaps
 from ...guard.jit import njit
 from .. import core
@@ -50,7 +51,7 @@ def trial_ledger(state, solid, cache, slot, model, work):
     es = kinetic + potential
     y = work.granular.y
     eg = granular_energy(y, model, work.nodes.u[nn - 1].reshape(m2 // 2, 2))
-    acc = 6 * model.granules.radius.shape[0]
+    acc = ledger_offset(model.granules.radius.shape[0])
     visc, fric, work_in = y[acc + ACC_VISC], y[acc + ACC_FRIC], y[acc + ACC_WORK]
     work.trial[0].roundoff = LEDGER_ROUNDOFF * (es + eg + abs(visc + fric) + abs(work_in))
     return energy_ledger(es, eg, visc, fric, work_in)
@@ -66,19 +67,19 @@ def contact_roundoff(y, dy, model, su, t):
     gr = model.granules
     radius = gr.radius
     n = radius.shape[0]
-    V = 3 * n
+    V = velocity_offset(n)
     pairs, walls, points, loads = model.pairs, model.walls, model.points, model.loads
     dp, dw, ds = overlaps(y, model, su)
     sq = 0.0  # the contacts' roundings are independent: they add in quadrature
     for c in range(dp.shape[0]):
         if dp[c] > 0.0:
-            sq += (pairs.A[c] * dp[c] * math.sqrt(dp[c]) * (radius[pairs.i[c]] + radius[pairs.j[c]])) ** 2
+            sq += (hertz_force(pairs.A[c], dp[c]) * (radius[pairs.i[c]] + radius[pairs.j[c]])) ** 2
     for c in range(dw.shape[0]):
         if dw[c] > 0.0:
-            sq += (walls.A[c] * dw[c] * math.sqrt(dw[c]) * radius[walls.g[c]]) ** 2
+            sq += (hertz_force(walls.A[c], dw[c]) * radius[walls.g[c]]) ** 2
     for c in range(ds.shape[0]):
         if ds[c] > 0.0:
-            sq += (points.A[c] * ds[c] * math.sqrt(ds[c]) * radius[points.g[c]]) ** 2
+            sq += (hertz_force(points.A[c], ds[c]) * radius[points.g[c]]) ** 2
     total = math.sqrt(sq)
     for i in range(n):
         total += gr.mass[i] * math.hypot(dy[V + 2 * i], dy[V + 2 * i + 1]) * max(abs(y[2 * i]), abs(y[2 * i + 1]))
@@ -95,7 +96,7 @@ def state_ledger(y, eta, etad, solid, model):
     kinetic, potential = modal_energy(eta, etad, solid.omega)
     es = kinetic + potential
     su = np.dot(solid.P, eta) if eta.shape[0] else np.zeros(2 * nc)
-    acc = 6 * model.granules.radius.shape[0]
+    acc = ledger_offset(model.granules.radius.shape[0])
     return energy_ledger(es, granular_energy(y, model, su.reshape(nc, 2)), y[acc + ACC_VISC], y[acc + ACC_FRIC],
                          y[acc + ACC_WORK])
 
@@ -161,8 +162,8 @@ def step_error(work, cfg, granules, t, h, defect, drift, tol):
     err = work.granular.err
     radius = granules.radius
     n = radius.shape[0]
-    V = 3 * n
-    OM = 5 * n
+    V = velocity_offset(n)
+    OM = spin_offset(n)
     ev = 0.0
     for i in range(n):
         ev = max(ev, abs(err[V + 2 * i]), abs(err[V + 2 * i + 1]), radius[i] * abs(err[OM + i]))

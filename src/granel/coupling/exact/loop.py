@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...granular.bundles import ACC_WORK
+from ...granular.bundles import ACC_WORK, ledger_offset
 from ...granular.contact import friction_map_slope
 from ...granular.kernels import moved_beyond
 from ...guard.jit import njit
@@ -80,8 +80,9 @@ def friction_slopes(state, law, cache, slot, frame, lam):
 @njit(cache=True)
 def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, log, out, done):
     """Accepted steps through the output times `targets`, from output done[0] on: a step that
-    reaches outputs fills their states in `out` (y, eta, eta', F per output) by dense output and,
-    when adaptive, is accepted only if their energy ledgers (13) stay within the bound too;
+    reaches outputs fills their states in `out` (a `DenseOut` of arrays, one row per output) by
+    dense output and, when adaptive, is accepted only if their energy ledgers (13) stay within
+    the bound too;
     done[0] counts the outputs filled. Returns (status, steps logged): core.DONE once all are
     filled, core.REBUILD, core.LOG_FULL, core.NO_CONVERGENCE, core.NON_FINITE or
     core.BALANCE_LOST (the ledger (13) drifted beyond cfg.ledger_limit)."""
@@ -94,7 +95,7 @@ def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, lo
     lim2 = cfg.max_disp * cfg.max_disp
     lam = np.zeros(nc)
     off = cache.ready.shape[0] - 1
-    oy, oeta, oetad, oF = out
+    oy, oeta, oetad, oF = out.y, out.eta, out.etad, out.F
     # outputs the last accepted step already passed (it ended a previous batch beyond its last output)
     while done[0] < targets.shape[0] and targets[done[0]] <= clock.t:
         o = done[0]
@@ -156,7 +157,7 @@ def advance_outputs(state, model, ref_pos, solid, cache, cfg, targets, kinks, lo
             return core.BALANCE_LOST, k  # even the smallest step lost the energy balance (13)
         ectl = control_error(trial, clock, h)  # before the clock moves: it rescales from the last step
         accept(state, cache, slot, h, work, ledger)
-        clock.work_max = max(clock.work_max, abs(state.y[6 * n + ACC_WORK]))
+        clock.work_max = max(clock.work_max, abs(state.y[ledger_offset(n) + ACC_WORK]))
         done[0] += filled
         friction_slopes(state, model.law, cache, slot, solid.frame, lam)
         log.t[k] = clock.t
@@ -180,7 +181,7 @@ def compile_plan(state, model, ref_pos, solid, cache, cfg, targets, kinks, log, 
     nc, nr, nb = state.F.shape[0], state.eta.shape[0], cache.nodes.shape[0]
     work = work_for.py_func(state.y, nc, nr, nb)  # in Python: the first process compiles work_for
     t, h, slot, ledger = float(state.clock[0]["t"]), float(cfg.h_max), 0, float(state.clock[0]["ledger"])
-    oy, oeta, oetad, _ = out
+    oy, oeta, oetad = out.y, out.eta, out.etad
     yield interface_solve, (state, t, h, model, solid, cache, slot, cfg, work)
     yield accept, (state, cache, slot, h, work, ledger)
     yield friction_slopes, (state, model.law, cache, slot, solid.frame, np.zeros(nc))

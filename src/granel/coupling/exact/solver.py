@@ -5,21 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...granular.bundles import Motion
+from ...granular.bundles import Motion, state_views
 from ...granular.kernels import rhs
-from ...granular.system import GranularState, GranularSystem, Stepper
+from ...granular.system import Stepper
 from ...guard.ahead import compile_ahead
-from ...solid.base import SolidModel
 from ...solid.modal import at_dofs
 from ...solid.reduction import residual_modes, static_modes
 from .. import core
 from ..frame import contact_frame, contact_normals
-from ..observation import Observation, observe_outputs
+from ..observation import Observation, OutputStates, observe_outputs
 from ..protocol import Reached, SolverError, StepSink
-from ..settings import SolverSettings
 from .dense import solid_at_outputs
 from .loop import advance_outputs
-from .state import CLOCK, ExactConfig, ExactSolid, ExactState, LastStep, initial_state, ops_cache
+from .state import CLOCK, DenseOut, ExactConfig, ExactSolid, ExactState, LastStep, initial_state, ops_cache
 
 
 # the exact integrator stops when the energy ledger (13) has drifted by this share of the input
@@ -35,11 +33,15 @@ class ExactSolver:
     error-controlled steps with dense output at the output times. Outputs come in batches of up
     to OUTPUT_BATCH from one compiled call, each batch ending at a checkpoint's output.
 
-    `scales` are the run's velocity and energy scales (`granular.scales.load_scales`), `kinks`
-    the times a step never crosses, `preload` the static forces on the solid at t = 0."""
+    Built from the run's coupled problem (`granel.problem.Problem`: its system, initial state,
+    solid, settings, schedule, the velocity and energy `scales` of `granular.scales.load_scales`,
+    the `kinks` a step never crosses, and the static forces on the solid at t = 0) and the
+    solid's eigenmodes."""
 
-    def __init__(self, system: GranularSystem, state0: GranularState, model: SolidModel, settings: SolverSettings,
-                 schedule, modes=None, scales=(1.0, 1.0), kinks=(), preload=None):
+    def __init__(self, problem, modes=None):
+        system, state0, model = problem.system, problem.state, problem.solid
+        settings, schedule, scales, kinks = problem.settings, problem.schedule, problem.scales, problem.kinks
+        preload = problem.solid_force0
         self.system, self.model, self.settings, self.schedule = system, model, settings, schedule
         self.name = "fast"
         self.y0 = state0.y.copy()
@@ -106,7 +108,8 @@ class ExactSolver:
         self.st.F[:, :] = F0
         self.st.q[:] = self.solid.P.T @ F0.ravel() if nr else 0.0
         self.st.u[:] = u0
-        self._set_batch(0, 1, (y[None].copy(), eta0[None].copy(), np.zeros((1, nr)), F0[None].copy()))  # the output at t = 0
+        at_start = DenseOut(y=y[None].copy(), eta=eta0[None].copy(), etad=np.zeros((1, nr)), F=F0[None].copy())
+        self._set_batch(0, 1, at_start)  # the output at t = 0
         clock = self.st.clock[0]
         clock["ledger"] = clock["ledger_start"] = float(self._batch["observation"].ledger[0])
 
@@ -114,7 +117,7 @@ class ExactSolver:
         """When the step loop is not compiled yet, a second process compiles the kernels it calls
         last (`loop.compile_plan`) while this one compiles the others (`guard.ahead`)."""
         st = initial_state(y, np.zeros_like(y), nr, nc, len(self.cache.nodes), 0.0, 0)
-        out = (np.empty((1, len(y))), np.empty((1, nr)), np.empty((1, nr)), np.empty((1, nc, 2)))
+        out = DenseOut(y=np.empty((1, len(y))), eta=np.empty((1, nr)), etad=np.empty((1, nr)), F=np.empty((1, nc, 2)))
         self._ahead = compile_ahead(advance_outputs, "granel.coupling.exact.loop:compile_plan",
                                     (st, self.stepper.model, self.stepper.nl.ref_pos, self.solid, self.cache, self.cfg,
                                      np.zeros(1), self.kinks, self.log, out, np.zeros(1, np.int64)))
@@ -151,7 +154,8 @@ class ExactSolver:
             k1 = min(k1, (k + every - 1) // every * every)  # a checkpoint output ends the batch
         targets = np.array([self._target(j) for j in range(k, k1 + 1)])
         K, nr, nc = len(targets), len(self.solid.omega), len(self.system.solid_contacts)
-        out = (np.empty((K, len(self.st.y))), np.empty((K, nr)), np.empty((K, nr)), np.empty((K, nc, 2)))
+        out = DenseOut(y=np.empty((K, len(self.st.y))), eta=np.empty((K, nr)), etad=np.empty((K, nr)),
+                       F=np.empty((K, nc, 2)))
         done = np.zeros(1, np.int64)
         st, error = self.st, None
         while done[0] < K:
@@ -160,22 +164,23 @@ class ExactSolver:
             if m:
                 steps.log_steps(self.log.t[:m], self.log.h[:m], self.log.iterations[:m], self.log.lam[:m])
             if status == core.REBUILD:
-                self.stepper.rebuild(st.y[: 2 * self.system.n].reshape(-1, 2))
+                self.stepper.rebuild(state_views(st.y, self.system.n).pos)
             elif status in (core.BALANCE_LOST, core.NO_CONVERGENCE, core.NON_FINITE):
                 error = SolverError(self._diagnosis(status))
                 break
         self._set_batch(k, int(done[0]), out)
         return Reached(int(done[0]), error)
 
-    def _set_batch(self, k0: int, n: int, out) -> None:
-        """Outputs k0 .. k0 + n - 1 from their states `out` (y, eta, eta', F), observed at once."""
-        y, eta, etad, F = (a[:n] for a in out)
+    def _set_batch(self, k0: int, n: int, out: DenseOut) -> None:
+        """Outputs k0 .. k0 + n - 1 from their states `out` (rows of a `DenseOut`), observed at once."""
+        y, eta, etad, F = out.y[:n], out.eta[:n], out.etad[:n], out.F[:n]
         nc = len(self.system.solid_contacts)
         su, energy = np.zeros((n, nc, 2)), np.zeros((n, 2))
         if n:
             solid_at_outputs(self.solid.P, self.solid.omega, eta, etad, su, energy)
         times = np.array([self._target(k0 + j) for j in range(n)])
-        obs = observe_outputs(times, y, su, energy, F, self.system, self.stepper.model, self.normals, self.solid.frame.tangent)
+        states = OutputStates(times=times, y=y, su=su, solid_energy=energy, F=F)
+        obs = observe_outputs(states, self.system, self.stepper.model, self.normals, self.solid.frame.tangent)
         self._batch = {"eta": eta, "etad": etad, "observation": obs}
 
     def _diagnosis(self, status: int) -> str:
@@ -217,7 +222,8 @@ class ExactSolver:
     def attributes(self) -> dict:
         s = self.settings
         return {"name": "fast", "integrator": "exact", "adaptive": int(s.adaptive), "rtol": s.rtol, "atol": s.atol,
-                "max_step": s.max_step, "dt0": s.dt, "mode_cutoff_hz": self.mode_cutoff, "force_model": s.force_model,
+                "max_step": s.max_step, "dt0": s.dt, "ledger_tol": s.ledger_tol, "mode_cutoff_hz": self.mode_cutoff,
+                "force_model": s.force_model,
                 "residual_modes": self.residual, "modes_kept": self.kept,
                 "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds,
                 "solid_representation": "modal" if self.nodal is None else "nodal"}
