@@ -180,7 +180,8 @@ def summary_rows(s: dict) -> list[tuple[str, str]]:
     eq = s.get("equilibrium")
     if eq:
         rows.append(("equilibrium", f"{int(eq['loaded_pairs'])} pairs and {int(eq['loaded_walls'])} wall contacts "
-                                    f"loaded, {int(eq['iterations'])} Newton iterations, residual {eq['residual_N']:.1e} N"))
+                                    f"loaded, {int(eq['iterations'])} Newton iterations, residual {eq['residual_N']:.1e} N "
+                                    f"(round-off bound {eq.get('tolerance_N', float('nan')):.1e} N)"))
         rows.append(("equilibrium forces", f"largest: pair {eq['max_pair_force_N']:.4g} N, wall "
                                            f"{eq['max_wall_force_N']:.4g} N, solid {eq['max_solid_force_N']:.4g} N; "
                                            f"deepest overlap {eq['max_overlap_m']:.3e} m"))

@@ -371,8 +371,10 @@ def equilibrate(system, state, solid):
     """Move the granules of `state` (in place) to the static equilibrium of the constant loads
     (`granular.static`) with the solid's static compliance at its contacts; returns the forces on
     the solid there (nc, 2), the equilibrium's numbers and its loaded contacts
-    (`Equilibrium.contacts`). A load that nothing holds is a ScenarioError naming the granule."""
-    from ..granular.static import NoEquilibrium, equilibrium
+    (`Equilibrium.contacts`). A load that nothing holds is a ScenarioError naming the granules and
+    their free direction (exit 2); a Newton that fails on a held medium one with exit 3."""
+    from ..granular.static import NoEquilibrium, NotConverged, equilibrium
+    from ..guard.exits import STOPPED
     from ..granular.system import Stepper
 
     C = None
@@ -386,6 +388,8 @@ def equilibrate(system, state, solid):
         eq = equilibrium(system, Stepper(system).model, C)
     except NoEquilibrium as err:
         raise ScenarioError(f"simulation.equilibrate: {err}") from None
+    except NotConverged as err:  # a numerical stop, not bad input
+        raise ScenarioError(f"simulation.equilibrate: {err}", code=STOPPED) from None
     state.pos[:] = eq.pos
     from ..io.results import wall_names
 
