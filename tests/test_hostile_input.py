@@ -235,7 +235,8 @@ def test_the_guards_stop_a_run_that_leaves_the_physics():
                 values[k][1] = v
         return Observation(times=np.array([1e-6, 2e-6]), theta=np.zeros((2, 2)), omega=np.zeros((2, 2)),
                            energy_media=np.array([[1.0, 0.0]] * 2), energy_solid=two(0.5),
-                           energy_solid_kinetic=two(0.5), energy_solid_potential=two(0.0), dissipated_viscous=two(0.2),
+                           energy_solid_kinetic=two(0.5), energy_solid_potential=two(0.0), energy_gravity=two(0.0),
+                           dissipated_viscous=two(0.2),
                            dissipated_friction=two(0.1), force_normal=np.zeros((2, 0)), force_tangential=np.zeros((2, 0)),
                            wall_force=np.zeros((2, 0, 2)), overlap_at=["granules A:1 and A:2"] * 2, **values)
 

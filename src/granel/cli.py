@@ -466,11 +466,12 @@ def export(
     energy density and stress (plane stress and von Mises, or the beam's bending stress) at every
     stored solid output."""
     from .run import load_result
-    from .viz.export import export_result, parse_formats, plan_export
+    from .viz.export import check_exportable, export_result, parse_formats, plan_export
 
     formats = parse_formats(format_)
     plan_export(result, out)
     ds = load_result(result)
+    check_exportable(ds, formats, result)
     plan_export(result, out, ds)
     with written(f"-o {out}", "the export"), progress_bar("[bold]export", remaining=False, transient=True) as bar:
         task = bar.add_task("export", total=None)

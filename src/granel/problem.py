@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .coupling.driver import Guards, Schedule
+from .coupling.driver import Guards, Schedule, Stored
 from .coupling.settings import SolverSettings
 from .granular.system import GranularState, GranularSystem
 from .solid.base import SolidModel
@@ -32,4 +32,5 @@ class Problem:
     input_texts: dict = field(default_factory=dict)  # {file name: its text}: the result carries its whole model
     scales: tuple = (1.0, 1.0)  # the run's velocity [m/s] and energy [J] scales (granular.scales.load_scales)
     kinks: tuple = ()  # times where a load or a wall's motion is not smooth [s]
+    stored: Stored = Stored()  # what the run keeps and its result stores (simulation.outputs)
     max_modes: int | None = None  # the most eigenmodes of a large solid (the automatic cut-off's cap)

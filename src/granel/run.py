@@ -21,7 +21,7 @@ from .coupling.driver import drive
 from .problem import Problem
 from .io.results import write_spec_netcdf
 from .io.run_result import base_attrs, trajectory_spec
-from .analysis.balance import relative_balance_error
+from .analysis.balance import balance_scale, relative_balance_error
 
 
 def make_solver(problem: Problem, sparse: bool | None = None):
@@ -68,7 +68,7 @@ def run_problem(problem: Problem, progress=None, checkpoint=None, resume=None, s
     # what a checkpoint resumes: the scenario, the method and the contents of the files it reads
     fp = fingerprint(problem.source + problem.settings.method + (encode(problem.inputs) if problem.inputs else ""))
     traj = drive(solver, problem.schedule, progress=progress, checkpoint=checkpoint, resume=resume, fingerprint=fp,
-                 guards=problem.guards, max_wall=max_wall)
+                 guards=problem.guards, max_wall=max_wall, stored=problem.stored)
     solid = problem.solid
     steps = traj.step_series("h")
     its = traj.step_series("iterations").astype(float)
@@ -166,6 +166,13 @@ def plan_run_outputs(output: Path, sc: S.Scenario, source: str, resume: Path | N
     return ckpt
 
 
+def _share(s: dict) -> str:
+    """The balance error's share of its scale, named (`analysis.balance.balance_scale`)."""
+    if not s.get("balance_scale_J", 0.0) > 0:
+        return "nothing stored or put in"
+    return f"{s['max_balance_error_rel']:.2e} of the {s['balance_scale']}, {s['balance_scale_J']:.3e} J"
+
+
 def summary_rows(s: dict) -> list[tuple[str, str]]:
     """The end-of-run table of a `summarize` dict: (label, value) rows."""
     rows = [("steps", f"{s['steps']}"), ("wall time", f"{s['wall_time_s']:.2f} s"),
@@ -175,7 +182,7 @@ def summary_rows(s: dict) -> list[tuple[str, str]]:
     if "min_step" in s:
         rows.append(("smallest step", f"{s['min_step']:.3e} s"))
     rows += [("input work", f"{s['input_work_J']:.6e} J"),
-             ("max balance error", f"{s['max_balance_error_J']:.3e} J ({s['max_balance_error_rel']:.2e} of input)")]
+             ("max balance error", f"{s['max_balance_error_J']:.3e} J ({_share(s)})")]
     rows += [(f"peak speed {m}", f"{p['m_per_s']:.4f} m/s ({p['granule']})") for m, p in s["peak_speed"].items()]
     eq = s.get("equilibrium")
     if eq:
@@ -249,7 +256,7 @@ def load_result(path, what: str = "result file"):
     gets its model record here (`with_model_record`). ResultFileError naming the file: code 4 if
     it cannot be read as NetCDF, 2 if it is not a result or is damaged."""
     from .io.model import check_result_model, has_record, read_record
-    from .io.results import ResultFileError, check_result_schema, read_netcdf_or
+    from .io.results import ResultFileError, check_result_schema, read_netcdf_or, with_every_granule
 
     path = Path(path)
     ds = read_netcdf_or(path, ResultFileError, what)
@@ -261,7 +268,7 @@ def load_result(path, what: str = "result file"):
     except Exception as e:  # noqa: BLE001 - invalid TOML, invalid fields
         raise _bad_scenario(path, e) from None
     check_result_model(ds, read_record(ds, path), path)
-    return ds
+    return with_every_granule(ds)
 
 
 def summarize(ds) -> dict:
@@ -269,8 +276,7 @@ def summarize(ds) -> dict:
     w = ds["input_work"].values
     wmax = float(np.max(np.abs(w))) if w.size else 0.0
     err = np.abs(ds["balance_error"].values)
-    speed = np.hypot(ds["v_x"].values, ds["v_y"].values)
-    peak = speed.max(axis=0)
+    scale, scale_name = balance_scale(ds)
     out = {
         "scenario": _scenario_name(ds),
         "solid": ds.attrs.get("solid_kind", ""),
@@ -279,19 +285,39 @@ def summarize(ds) -> dict:
         "simulated_time_s": float(ds["time"].values[-1]),
         "input_work_J": wmax,
         "max_balance_error_J": float(err.max()) if err.size else 0.0,
-        "max_balance_error_rel": relative_balance_error(ds) if wmax > 0 else float(err.max()),
+        "max_balance_error_rel": relative_balance_error(ds, scale) if scale > 0 else None,
+        "balance_scale": scale_name,
+        "balance_scale_J": scale,
         "peak_speed": {},
     }
-    for m in np.unique(ds["medium"].values):
-        sel = ds["medium"].values == m
-        g = int(np.argmax(np.where(sel, peak, -1)))
-        out["peak_speed"][str(m)] = {"granule": str(ds["granule"].values[g]), "m_per_s": float(peak[g])}
+    out["peak_speed"] = _peak_speeds(ds)
     for key in ("solver_mean_iterations", "solver_min_step"):
         if key in ds.attrs:
             out[key[7:]] = float(ds.attrs[key])
     eq = {k[len("equilibrium_"):]: float(v) for k, v in ds.attrs.items() if k.startswith("equilibrium_")}
     if eq:
         out["equilibrium"] = eq
+    return out
+
+
+def _peak_speeds(ds) -> dict:
+    """{medium: {granule, m_per_s}}: the fastest granule of each medium among those whose states
+    the result stores (every granule, the traced ones, or none)."""
+    if "v_x" not in ds:
+        return {}
+    labels, media = np.asarray(ds["granule"].values), np.asarray(ds["medium"].values)
+    stored = np.arange(len(labels))
+    if "traced" in ds:  # a few granules' traces
+        index = {str(g): k for k, g in enumerate(labels)}
+        stored = np.array([index[str(g)] for g in ds["traced"].values], int)
+    peak = np.hypot(ds["v_x"].values, ds["v_y"].values).max(axis=0)
+    keep = np.isfinite(peak)  # a result read with every granule: NaN where not traced
+    stored, peak = stored[keep], peak[keep]
+    out = {}
+    for m in np.unique(media[stored]):
+        sel = media[stored] == m
+        g = int(np.argmax(np.where(sel, peak, -1)))
+        out[str(m)] = {"granule": str(labels[stored[g]]), "m_per_s": float(peak[g])}
     return out
 
 

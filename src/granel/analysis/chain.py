@@ -14,6 +14,7 @@ import numpy as np
 from ..granular.contact import contact_law_derivatives
 from ..granular.contact import hertz_overlap
 from ..granular.materials import pair_coefficients, point_coefficient, wall_coefficients
+from ..io.results import require, require_states
 
 # beads of one mass within this share; springs of one stiffness within this share (the
 # equilibrium's residual, 1e-10 of the load, spreads the contacts' forces far less)
@@ -126,7 +127,8 @@ def chain_contacts(ds, system):
             raise ChainError(f"equilibrium contact {name!r} is neither a pair nor a wall contact")
         i, j = index[pair[0]], index[pair[1]]
         pairs[(min(i, j), max(i, j))] = float(d)
-    if "contact_force_normal" in ds and ds.sizes.get("contact", 0):
+    require(ds, ["contact_force_normal"] * bool(ds.sizes.get("contact", 0)), "the chain's analysis")
+    if ds.sizes.get("contact", 0):
         for c, F in enumerate(np.asarray(ds["contact_force_normal"].values[0], float)):
             if F > 0:  # pressed on the solid at rest: its overlap from Hertz's law, eq. (2)
                 g = int(system.points.g[c])
@@ -162,6 +164,7 @@ def chain_axis(ds, system, order) -> np.ndarray:
     """The unit vector from the chain's first bead to its last at the first output; ChainError
     when a bead lies off that line (by more than STRAIGHT of the smallest radius)."""
     labels = list(system.labels)
+    require_states(ds, "the chain's analysis", order)
     x0 = np.column_stack([ds["x"].values[0, order], ds["y"].values[0, order]])
     axis = x0[-1] - x0[0]
     axis /= np.hypot(*axis)

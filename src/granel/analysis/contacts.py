@@ -14,6 +14,7 @@ import numpy as np
 
 from ..granular.materials import pair_coefficients
 from ..granular.static import hertz_force_stiffness
+from ..io.results import require, require_states
 
 
 def _pairs(system) -> np.ndarray:
@@ -30,6 +31,7 @@ def peak_pair_force(ds, system) -> float:
         return 0.0
     i, j = pairs[:, 0], pairs[:, 1]
     A = pair_coefficients(system.bodies(i), system.bodies(j), 0.0)[0]
+    require_states(ds, "the largest force between granules")
     x, y = ds["x"].values, ds["y"].values  # (time, granule)
     peak = 0.0
     for start in range(0, x.shape[0], 512):  # blocks of outputs: memory stays at 512 x pairs
@@ -41,8 +43,10 @@ def peak_pair_force(ds, system) -> float:
 def peak_forces(ds, system) -> dict[str, float]:
     """peak_contact_force_N (any granule pair, wall or solid contact), peak_pair_force_N,
     peak_wall_force_N and peak_solid_force_N of a run (0 where there is no such contact)."""
-    wall = float(np.nanmax(ds["wall_force_normal"].values)) if "wall_force_normal" in ds and ds["wall_force_normal"].size else 0.0
-    solid = float(np.nanmax(ds["contact_force_normal"].values)) if "contact_force_normal" in ds and ds["contact_force_normal"].size else 0.0
+    walls, contacts = ds.sizes.get("wall", 0), ds.sizes.get("contact", 0)
+    require(ds, ["wall_force_normal"] * bool(walls) + ["contact_force_normal"] * bool(contacts), "the peak forces")
+    wall = float(np.nanmax(ds["wall_force_normal"].values)) if walls and ds.sizes.get("time", 0) else 0.0
+    solid = float(np.nanmax(ds["contact_force_normal"].values)) if contacts and ds.sizes.get("time", 0) else 0.0
     pair = peak_pair_force(ds, system)
     return {"peak_contact_force_N": max(pair, wall, solid), "peak_pair_force_N": pair,
             "peak_wall_force_N": max(wall, 0.0), "peak_solid_force_N": max(solid, 0.0)}

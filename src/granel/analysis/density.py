@@ -7,6 +7,7 @@ import numpy as np
 
 from ..granular.bundles import state_size, state_views
 from ..granular.materials import granule_volume
+from ..io.results import granule_column, require_states
 
 
 def excited_reference(ds) -> float:
@@ -16,7 +17,7 @@ def excited_reference(ds) -> float:
     from .reciprocity import excitation_of
 
     label, _ = excitation_of(ds)
-    g = list(ds["granule"].values).index(label)
+    g = granule_column(ds, label, "the energy density's reference w0 (eq. 14)")
     rec = read_record(ds)
     v0 = float(np.hypot(ds["v_x"].values[:, g], ds["v_y"].values[:, g]).max())
     return 0.5 * float(rec.mass[g]) * v0**2 / granule_volume(float(rec.radius[g]))
@@ -49,6 +50,7 @@ def beam_energy_density_grid(model, q, v, nx: int = 21) -> tuple[np.ndarray, np.
 
 def granule_states(ds, idx: np.ndarray) -> np.ndarray:
     """The granular state vectors y (see granular.kernels) at output indices idx: (len(idx), 6n+3)."""
+    require_states(ds, "the granules' energy density")
     x, y = ds["x"].values[idx], ds["y"].values[idx]
     n = x.shape[1]
     Y = np.zeros((len(idx), state_size(n)))

@@ -17,6 +17,9 @@ def modal_coordinates(ds, modes=None, model=None):
 
     Solids with all modes store modal coordinates (whichever method ran); a solid too large for
     them stores the reduced state q, v, projected here on `modes` (of `model` if not given)."""
+    from ..io.results import require
+
+    require(ds, ["solid_time"], "the solid's modal coordinates")
     t = ds["solid_time"].values
     if "solid_eta" in ds:
         return t, ds["solid_eta"].values.astype(float), ds["solid_eta_dot"].values.astype(float), ds["mode_omega"].values

@@ -399,6 +399,9 @@ def _free_response(ds, system, order, axis, f_bound: float, max_strain: float, b
     transient load, thinned to about SAMPLES_PER_PERIOD samples a period of f_bound, its first
     budget(spacing) samples. CutoffError for outputs too sparse for f_bound, nothing that sets the
     chain moving, or a swing beyond max_strain (not the linear regime)."""
+    from ..io.results import require_states
+
+    require_states(ds, "the chain's free response", order)
     t = np.asarray(ds["time"].values, float)
     dt = (t[-1] - t[0]) / max(len(t) - 1, 1)
     if len(t) < 2 or 1.0 / dt < 2.5 * f_bound:

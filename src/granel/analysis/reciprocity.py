@@ -10,6 +10,7 @@ import numpy as np
 
 from ..granular.loads import KINDS
 from ..io.model import read_record
+from ..io.results import granule_column, require_states
 
 
 def arrival_time(t, signal, fraction: float = 0.05, reference: float | None = None) -> float:
@@ -50,7 +51,7 @@ def pulse_arrival(t, signal, driven_peak: float, fraction: float = 0.05, floor: 
 
 def driven_peak_speed(ds, label: str) -> float:
     """The peak speed of granule `label` (the driven one: the input side of `pulse_arrival`)."""
-    g = list(ds["granule"].values).index(label)
+    g = granule_column(ds, label, "the diode's metrics")
     return float(np.hypot(ds["v_x"].values[:, g], ds["v_y"].values[:, g]).max())
 
 
@@ -62,6 +63,7 @@ def excitation_of(ds) -> tuple[str, np.ndarray]:
         if not rec.strikers:
             raise ValueError("the run has neither an excitation nor an initial velocity: nothing was driven")
         g = rec.strikers[0]
+        require_states(ds, "finding the striker's direction", [g])
         v = np.array([ds["v_x"].values[0, g], ds["v_y"].values[0, g]], float)
         return rec.labels[g], v / np.hypot(*v) if np.hypot(*v) > 0 else v
     e = rec.loads[0]
@@ -91,7 +93,7 @@ def pushed_along(ds, label: str) -> np.ndarray:
 
 
 def directed_velocity(ds, label: str, direction) -> np.ndarray:
-    g = list(ds["granule"].values).index(label)
+    g = granule_column(ds, label, "the diode's metrics")
     return ds["v_x"].values[:, g] * direction[0] + ds["v_y"].values[:, g] * direction[1]
 
 
@@ -159,7 +161,31 @@ def static_work(ds, medium: str | None = None) -> np.ndarray:
     media = ds["medium"].values
     for g, F in static_loads(ds):
         if medium is None or str(media[g]) == medium:
+            require_states(ds, "the preload's work", [g])
             w += F[0] * (ds["x"].values[:, g] - ds["x"].values[0, g]) + F[1] * (ds["y"].values[:, g] - ds["y"].values[0, g])
+    return w
+
+
+def weights(ds, medium: str | None = None) -> list[tuple[int, np.ndarray]]:
+    """(granule index, its weight m g [N]) of the granules of `medium` (all by default) when the
+    run has gravity (the model record's); [] otherwise."""
+    rec = read_record(ds)
+    g = np.asarray(rec.gravity, float)
+    if not np.any(g):
+        return []
+    media = ds["medium"].values
+    return [(k, float(rec.mass[k]) * g) for k in range(rec.n) if medium is None or str(media[k]) == medium]
+
+
+def gravity_work(ds, medium: str | None = None) -> np.ndarray:
+    """Gravity's work since t = 0 on the granules of `medium`: sum m g . (r(t) - r(0)), the fall
+    of their gravitational energy; zeros without gravity."""
+    w = np.zeros(ds.sizes["time"])
+    held = weights(ds, medium)
+    if held:
+        require_states(ds, "gravity's work on a medium", [k for k, _ in held])
+    for k, F in held:
+        w += F[0] * (ds["x"].values[:, k] - ds["x"].values[0, k]) + F[1] * (ds["y"].values[:, k] - ds["y"].values[0, k])
     return w
 
 
@@ -189,19 +215,23 @@ def dynamic_input(ds) -> tuple[float, str | None]:
 
 def dynamic_energy(ds, medium: str | None) -> tuple[np.ndarray, str | None]:
     """(E(t), why it is NaN) of a medium (None: the solid) counted from its static state: under
-    a preload E(t) - E(0) less its static loads' work (`static_work`; E(0) is the equilibrium's,
-    the medium at rest), else E(t). To second order in the motion this is the medium's kinetic
+    a preload or, from an equilibrium, under its weight, E(t) - E(0) less its static loads' and
+    gravity's work (`static_work`, `gravity_work`; E(0) is the equilibrium's, the medium at rest),
+    else E(t). To second order in the motion this is the medium's kinetic
     energy and its contacts' elastic energy about equilibrium."""
     name = "energy_solid" if medium is None else f"energy_{medium.lower()}"
     e = np.asarray(ds[name].values, float)
-    if not static_loads(ds):
+    if not static_loads(ds) and not (medium is not None and "equilibrium_contact" in ds and weights(ds, medium)):
         return e, None
     if medium is not None:
         sel = ds["medium"].values == medium
+        require_states(ds, f"the energy of medium {medium} about its preloaded equilibrium", np.flatnonzero(sel))
         if any(np.any(ds[v].values[0, sel] != 0) for v in ("v_x", "v_y", "omega")):
             return np.full_like(e, np.nan), (f"medium {medium} moves at the start of a precompressed run: the result "
                                               "does not separate its motion from the equilibrium's energy")
-    return e - e[0] - (static_work(ds, medium) if medium is not None else 0.0), None
+    if medium is None:
+        return e - e[0], None
+    return e - e[0] - static_work(ds, medium) - gravity_work(ds, medium), None
 
 
 def run_metrics(ds, measured: str, modes=None, model=None) -> dict:

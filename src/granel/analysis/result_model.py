@@ -33,7 +33,8 @@ def result_system(ds, name="result") -> GranularSystem:
     return GranularSystem(labels=list(rec.labels), medium_index=rec.medium_index, media=list(rec.media),
                           pos0=rec.position0, radius=rec.radius, mass=rec.mass, inertia=rec.inertia, E=rec.E, nu=rec.nu,
                           law=ContactLaw(rec.mu, rec.alpha_n, rec.k_s), walls=walls, solid_contacts=contacts,
-                          excitations=loads, skin=rec.skin, toward_solid=rec.toward_solid, strikers=rec.strikers)
+                          excitations=loads, skin=rec.skin, toward_solid=rec.toward_solid, strikers=rec.strikers,
+                          gravity=rec.gravity)
 
 
 def result_solid(ds, name="result") -> SolidModel:

@@ -10,6 +10,9 @@ import numpy as np
 
 def nearest_solid_outputs(ds, times) -> np.ndarray:
     """Indices of the stored solid states nearest to `times`."""
+    from ..io.results import require
+
+    require(ds, ["solid_time"], "the solid's state")
     st = ds["solid_time"].values
     return np.abs(st[None, :] - np.atleast_1d(np.asarray(times, float))[:, None]).argmin(axis=1)
 

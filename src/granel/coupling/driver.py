@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..io.checkpoint import load_checkpoint, save_checkpoint
-from ..io.trajectory import Trajectory
+from ..io.trajectory import Stored, Trajectory
 from .observation import Observation, energy_ledger
 from .protocol import Solver
 
@@ -95,7 +95,8 @@ def _initial_of_record(traj: Trajectory) -> tuple[float, float]:
     """The ledger (13) and the energy a run started with, from its first recorded output (for a
     checkpoint written before they were stored with it)."""
     first = {k: traj.first(k) for k in traj.names}
-    ledger = energy_ledger.py_func(float(first["energy_solid"]), float(np.sum(first["energy_media"])),
+    granular = float(np.sum(first["energy_media"])) + float(first.get("energy_gravity", 0.0))
+    ledger = energy_ledger.py_func(float(first["energy_solid"]), granular,
                            float(first["dissipated_viscous"]), float(first["dissipated_friction"]), float(first["input_work"]))
     return float(ledger), float(np.sum(first["energy_media"]) + first["energy_solid"])
 
@@ -118,12 +119,13 @@ def _watcher(progress, max_wall, t_start):
 
 
 def drive(solver: Solver, schedule: Schedule, progress=None, checkpoint=None, resume=None, fingerprint: str = "",
-          guards: Guards | None = None, max_wall: float | None = None) -> Trajectory:
+          guards: Guards | None = None, max_wall: float | None = None, stored: Stored = Stored()) -> Trajectory:
     """Run `solver` through `schedule`: record every output, store the solid state at its
     outputs, report progress(t) and write a resumable checkpoint every `checkpoint_every`
     (atomically, with `fingerprint` naming the scenario); `resume` continues from such a file.
     Every output passes the `guards` (a `PhysicsStop` otherwise); past `max_wall` seconds of wall
-    time the run stops (`WallTimeExceeded`), its last checkpoint resumable."""
+    time the run stops (`WallTimeExceeded`), its last checkpoint resumable. Only what `stored`
+    names is kept (the traced granules' states, the solid's states if stored)."""
     guards = guards or Guards()
     t_start = time.perf_counter()
 
@@ -132,13 +134,13 @@ def drive(solver: Solver, schedule: Schedule, progress=None, checkpoint=None, re
         check_guards(obs, ledger0, energy0, guards)
         traj.record_block(obs.times, obs.recorded(ledger0))
         rows = np.flatnonzero(np.arange(first, first + len(obs)) % schedule.solid_every == 0)
-        if len(rows):
+        if len(rows) and stored.solid:
             traj.record_solid_block(obs.times[rows], solver.solid_states(rows))
 
     if resume is not None:
         arrays, recorded, _ = load_checkpoint(resume, fingerprint)
         solver.restore(arrays)
-        traj = Trajectory.unpack(recorded)
+        traj = Trajectory.unpack(recorded).keep(stored)
         k = int(arrays["k"])
         if "driver:ledger0" in arrays:
             ledger0, energy0 = float(arrays["driver:ledger0"]), float(arrays["driver:energy0"])
@@ -146,7 +148,7 @@ def drive(solver: Solver, schedule: Schedule, progress=None, checkpoint=None, re
             ledger0, energy0 = _initial_of_record(traj)
     else:
         solver.start()
-        traj = Trajectory()
+        traj = Trajectory().keep(stored)
         first = solver.observe()
         ledger0 = float(first.ledger[0])
         energy0 = float(np.sum(first.energy_media[0]) + first.energy_solid[0])

@@ -10,14 +10,14 @@ from typing import NamedTuple
 import numpy as np
 
 from ..granular.bundles import state_views
-from ..granular.kernels import granule_energies, overlaps, wall_forces
+from ..granular.kernels import granule_energies, gravity_energy, overlaps, wall_forces
 from ..guard.jit import njit
 from ..solid.modal import mode_energy
 
 
 @njit(cache=True, inline="always")
 def energy_ledger(e_solid, e_granular, dissipated_viscous, dissipated_friction, input_work):
-    """E_solid + E_granular + D - W, eq. (13): constant in time for an exact solution (scalars or
+    """E_solid + E_granular + D - W, eq. (13) (E_granular with the granules' gravitational potential): constant in time for an exact solution (scalars or
     arrays; from Python, `energy_ledger.py_func` does the same arithmetic with numpy, without
     compiling or loading a kernel for each array layout)."""
     return e_solid + e_granular + (dissipated_viscous + dissipated_friction) - input_work
@@ -26,9 +26,10 @@ def energy_ledger(e_solid, e_granular, dissipated_viscous, dissipated_friction, 
 @njit(cache=True)
 def granular_energy(y, model, su):
     """E_granular of eq. (11), the granules' kinetic, rotational and contact energy, with the solid
-    contact points displaced by su (nc, 2)."""
+    contact points displaced by su (nc, 2), plus their gravitational potential (`gravity_energy`):
+    the granular share of the ledger (13)."""
     kin, rot, pot = granule_energies(y, model, su)
-    return kin.sum() + rot.sum() + pot.sum()
+    return kin.sum() + rot.sum() + pot.sum() + gravity_energy(y, model.granules)
 
 
 @njit(cache=True)
@@ -49,13 +50,14 @@ class OutputQuantities(NamedTuple):
 
     media: np.ndarray  # (K, n_media) each medium's energy (11)
     granular: np.ndarray  # (K,) all granules' energy (11)
+    gravity: np.ndarray  # (K,) their gravitational potential energy
     overlap: np.ndarray  # (K,) the deepest overlap over the smaller radius ...
     where: np.ndarray  # (K, 2) int: ... at which kind of contact (0 pair, 1 wall, 2 solid) and index
     walls: np.ndarray  # (K, n_walls, 2): the force each wall takes
 
 
 def output_buffers(K: int, n_media: int, n_walls: int) -> OutputQuantities:
-    return OutputQuantities(media=np.zeros((K, n_media)), granular=np.zeros(K), overlap=np.zeros(K),
+    return OutputQuantities(media=np.zeros((K, n_media)), granular=np.zeros(K), gravity=np.zeros(K), overlap=np.zeros(K),
                             where=np.zeros((K, 2), np.int64), walls=np.zeros((K, n_walls, 2)))
 
 
@@ -72,6 +74,7 @@ def output_quantities(Y, su, model, medium, times, q):
         for i in range(kin.shape[0]):
             q.media[o, medium[i]] += kin[i] + rot[i] + pot[i]
         q.granular[o] = kin.sum() + rot.sum() + pot.sum()
+        q.gravity[o] = gravity_energy(Y[o], model.granules)
         dp, dw, ds = overlaps(Y[o], model, su[o])
         best, kind, idx = 0.0, -1, -1
         for c in range(dp.shape[0]):
@@ -118,6 +121,7 @@ class Observation:
     vel: np.ndarray
     omega: np.ndarray
     energy_media: np.ndarray  # (K, n_media)
+    energy_gravity: np.ndarray  # (K,) the granules' gravitational potential (`granular.kernels.gravity_energy`)
     energy_solid: np.ndarray
     energy_solid_kinetic: np.ndarray
     energy_solid_potential: np.ndarray
@@ -175,8 +179,9 @@ def observe_outputs(states: OutputStates, system, model, normals, tangents) -> O
     v = state_views(Y, n)
     dv, df, w = v.dissipated_viscous, v.dissipated_friction, v.input_work
     where = q.where
-    ledger = energy_ledger.py_func(ek + ep, q.granular, dv, df, w)  # numpy's arithmetic, no kernel per layout
+    ledger = energy_ledger.py_func(ek + ep, q.granular + q.gravity, dv, df, w)  # numpy's arithmetic, no kernel per layout
     return Observation(times=times, pos=v.pos, theta=v.theta, vel=v.vel, omega=v.spin, energy_media=q.media,
+                       energy_gravity=q.gravity,
                        energy_solid=ek + ep, energy_solid_kinetic=ek, energy_solid_potential=ep, dissipated_viscous=dv,
                        dissipated_friction=df, input_work=w, ledger=ledger,
                        force_normal=np.einsum("kij,ij->ki", F, normals), force_tangential=np.einsum("kij,ij->ki", F, tangents),

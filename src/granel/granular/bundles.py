@@ -69,9 +69,14 @@ def state_views(y: np.ndarray, n: int) -> StateViews:
 
 
 class Granules(NamedTuple):
+    """Each granule's radius, mass and moment of inertia (n,), its weight m g (n, 2) and the
+    centre its gravitational potential is measured from (n, 2; the centres as built)."""
+
     radius: np.ndarray  # (n,)
     mass: np.ndarray
     inertia: np.ndarray
+    weight: np.ndarray  # (n, 2) [N]
+    datum: np.ndarray  # (n, 2) [m]
 
 
 class Law(NamedTuple):

@@ -1,5 +1,5 @@
 """Compiled discrete-element kernels: the right-hand side of eq. (1) with the contact law of
-`granular.contact` at every pair, wall and solid point, RK4 (with sub-steps where friction is
+`granular.contact` at every pair, wall and solid point and the granules' weights, RK4 (with sub-steps where friction is
 stiff), per-granule energies (11), and the interface forces with their Jacobian.
 
 Kernel inputs travel in the bundles of `granular.bundles` (state layout documented there).
@@ -208,7 +208,9 @@ def rhs(t, y, dy, model, motion, tau):
         dy[V + 2 * i] += fx
         dy[V + 2 * i + 1] += fy
         p_in += fx * y[V + 2 * i] + fy * y[V + 2 * i + 1]
-    for i in range(n):  # forces -> accelerations
+    for i in range(n):  # weights (a potential: not input work, `gravity_energy`), then forces -> accelerations
+        dy[V + 2 * i] += gr.weight[i, 0]
+        dy[V + 2 * i + 1] += gr.weight[i, 1]
         dy[V + 2 * i] /= gr.mass[i]
         dy[V + 2 * i + 1] /= gr.mass[i]
         dy[OM + i] /= gr.inertia[i]
@@ -382,6 +384,17 @@ def granule_energies(y, model, su):
         if ds[c] > 0.0:
             pot[model.points.g[c]] += hertz_potential(model.points.A[c], ds[c])
     return kin, rot, pot
+
+
+@njit(cache=True)
+def gravity_energy(y, granules):
+    """The granules' gravitational potential energy -sum m g . (x - x_datum) [J], measured from
+    their centres as built (zero without gravity)."""
+    e = 0.0
+    w, d = granules.weight, granules.datum
+    for i in range(w.shape[0]):
+        e -= w[i, 0] * (y[2 * i] - d[i, 0]) + w[i, 1] * (y[2 * i + 1] - d[i, 1])
+    return e
 
 
 @njit(cache=True)

@@ -23,7 +23,8 @@ TRUNCATION_ERROR = 0.1
 
 def load_scales(system: GranularSystem, state: GranularState, duration: float = 0.0) -> tuple[float, float]:
     """A run of `duration` seconds: its velocity and energy scales. The velocity: the largest speed
-    a load can give its granule (peak impulse / mass), or the initial motion's. The energy: the
+    a load can give its granule (peak impulse / mass), gravity in a free fall over the run, or the
+    initial motion's. The energy: the
     kinetic energy that speed carries, or, for a drive (harmonic, chirp), the work its amplitude
     does at that speed over the time it drives, A v D / 2, which over many cycles is what flows
     through the system; 1 m/s and 1 J if nothing is bounded (constant loads alone)."""
@@ -42,6 +43,10 @@ def load_scales(system: GranularSystem, state: GranularState, duration: float = 
         if w.drive is not None and system.n:
             sp = w.drive.peak_speed()
             scales.append((sp, 0.5 * float(system.mass.max()) * sp * sp))
+    accel = float(np.hypot(*system.gravity))
+    if accel > 0 and duration > 0 and system.n:  # the most speed gravity gives a granule in the run: free fall
+        sp = accel * duration
+        scales.append((sp, 0.5 * float(system.mass.max()) * sp * sp))
     v = np.abs(state.vel)
     for g in (np.flatnonzero(v.max(axis=1) > 0) if v.size else []):
         sp = float(np.hypot(*state.vel[g]))
@@ -77,11 +82,13 @@ def safe_time_step(system, excitations, init_speed: float = 0.0) -> float:
     """An upper bound for the RK4 step: 1/20 of the shortest Hertz collision time expected
     (granule pairs of each size and granule-wall impacts at the largest speed an excitation
     or an initial velocity can impart, impulse / mass), 1/20 of the period of such a contact
-    compressed by the largest load (constant and tabulated loads included), and 1/10 of the
+    compressed by the largest load (constant and tabulated loads included, or the granules' whole
+    weight), and 1/10 of the
     shortest pulse duration."""
     bounds = []
     speed = init_speed
     force = max((e.history.peak() for e in excitations if math.isfinite(e.history.peak())), default=0.0)
+    force = max(force, float(np.hypot(*system.weights.sum(axis=0))) if system.n else 0.0)  # all the weight on one contact
     for e in excitations:
         m = system.mass[e.granule]
         J = e.history.peak_impulse()

@@ -66,8 +66,8 @@ class Equilibrium:
 
 
 def constant_loads(system) -> np.ndarray:
-    """(n, 2): the constant excitations (preloads) on each granule."""
-    F = np.zeros((system.n, 2))
+    """(n, 2): the constant excitations (preloads) and the weight on each granule."""
+    F = system.weights.copy()
     for e in system.excitations:
         if e.history.static:
             d = np.asarray(e.direction, float)
@@ -98,6 +98,11 @@ def _blocks(rows, cols, blocks, shape):
 # two positions and R_i + R_j - |d| (or the wall's, or the solid point's, projections), each one
 # ulp of the largest operand; the force's share is k times that, plus an ulp of the force itself.
 OVERLAP_ROUNDINGS = 2.0
+# the largest move of a granule in one Newton step, as a share of its radius: the overlap limit
+# of a run (simulation.overlap_limit's default). A longer step, on the tangent stiffness of contacts
+# that barely touch, can carry a granule through its neighbours to where their contacts push it on,
+# which lowers the energy without end
+STEP_LIMIT = 0.1
 # a contact whose gap is below this share of its radius is touching: the predictor gives it the
 # secant stiffness of the load (a packing written to a few digits touches only to those digits)
 TOUCHING = 1e-6
@@ -286,7 +291,9 @@ def equilibrium(system, model, compliance=None, max_iterations: int = 200) -> Eq
     else:
         c, V = np.ones(0), np.zeros((2 * nc, 0))
     x, w = system.pos0.astype(float).copy(), np.zeros(len(c))
-    scale = max(np.hypot(*loads.T).max(initial=0.0), 1e-300)
+    # the largest force a contact may carry: the largest load, or all of them together (a column's
+    # weight rests on its lowest contact)
+    scale = max(np.hypot(*loads.T).max(initial=0.0), float(np.hypot(*loads.sum(axis=0))), 1e-300)
     # the stiffness of a contact under the largest load: the scale of the Levenberg-Marquardt shift
     A_ref = np.concatenate([model.pairs.A, model.walls.A, model.points.A]).max(initial=1.0)
     k_ref = hertz_stiffness.py_func(A_ref, hertz_overlap(scale, A_ref))
@@ -347,6 +354,9 @@ def equilibrium(system, model, compliance=None, max_iterations: int = 200) -> Eq
             dx, dw = newton_step(now.balance.K, now.balance.F, now.G, lam)
         except RuntimeError:  # singular even with the shift
             lam = max(100.0 * lam, 1e-6 * k_ref)
+            continue
+        if np.max(np.hypot(*dx.T) / system.radius, initial=0.0) > STEP_LIMIT:
+            lam *= 10.0  # beyond the trust region: a granule would jump through its neighbours
             continue
         trial = residual(x + dx, w + dw)
         if trial.improves(now):

@@ -72,6 +72,7 @@ class GranularSystem:
     skin: float = 0.0
     toward_solid: np.ndarray | None = None  # (n, 2) unit vectors toward the solid (NaN: a medium away from it)
     strikers: tuple[int, ...] = ()  # the granules given an initial motion, in the scenario's order
+    gravity: tuple[float, float] = (0.0, 0.0)  # the acceleration of gravity in the plane [m/s^2]
     # derived: the bundles the kernels read
     wall_geometry: tuple = field(init=False)  # (p0, tangent, length, normal, medium index) per wall
     points: Points = field(init=False)
@@ -94,7 +95,23 @@ class GranularSystem:
 
     @property
     def granules(self) -> Granules:
-        return Granules(self.radius, self.mass, self.inertia)
+        return Granules(self.radius, self.mass, self.inertia, self.weights, np.asarray(self.pos0, float).reshape(-1, 2))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """(n, 2) each granule's weight m g [N]."""
+        return np.asarray(self.mass, float)[:, None] * np.asarray(self.gravity, float)[None, :]
+
+    @property
+    def has_gravity(self) -> bool:
+        return bool(np.any(np.asarray(self.gravity, float) != 0.0))
+
+    def with_solid_contacts_moved(self, offsets: np.ndarray) -> None:
+        """Move the solid contact points' rest positions by `offsets` (nc, 2) [m] (the solid's sag
+        under its own weight), in place."""
+        self.solid_contacts = [SolidContact(c.granule, (float(c.point[0] + d[0]), float(c.point[1] + d[1])), c.normal,
+                                            c.name) for c, d in zip(self.solid_contacts, np.asarray(offsets, float))]
+        self.points = self.points._replace(p=np.array([c.point for c in self.solid_contacts], float).reshape(-1, 2))
 
     @property
     def contact_law(self) -> Law:

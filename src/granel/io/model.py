@@ -75,7 +75,8 @@ class ResultModel:
     solid: kind, reduced DOFs, recipe (JSON), digest of M and K, mesh nodes and elements (None for
     a rigid solid), the natural frequencies of the modal coordinates (the result's `mode_omega`;
     None without), the loads, each granule's unit vector toward the solid (NaN for a medium away
-    from it) and the granules given an initial motion (in the scenario's order)."""
+    from it), the granules given an initial motion (in the scenario's order) and the acceleration of
+    gravity [m/s^2] (a result without `gravity` predates it: none)."""
 
     labels: tuple[str, ...]
     media: tuple[str, ...]
@@ -102,6 +103,7 @@ class ResultModel:
     loads: tuple[LoadRecord, ...] = ()
     toward_solid: np.ndarray | None = None
     strikers: tuple[int, ...] = ()
+    gravity: tuple[float, float] = (0.0, 0.0)
 
     @property
     def n(self) -> int:
@@ -136,7 +138,8 @@ def model_record(system, solid) -> ResultModel:
         solid_recipe=recipe, solid_digest=sparse_digest((solid.M, solid.K)),
         nodes=None if solid.nodes is None else np.asarray(solid.nodes, float),
         elements=None if solid.elements is None else np.asarray(solid.elements, np.int64), loads=loads,
-        toward_solid=np.asarray(system.toward_solid, float).reshape(-1, 2), strikers=tuple(int(g) for g in system.strikers))
+        toward_solid=np.asarray(system.toward_solid, float).reshape(-1, 2), strikers=tuple(int(g) for g in system.strikers),
+        gravity=_pair(system.gravity))
 
 
 def _pair(p) -> tuple[float, float]:
@@ -196,7 +199,8 @@ def record_entries(rec: ResultModel) -> tuple[dict, dict]:
              "model_walls": nw, "model_contacts": nc, "model_loads": nl, "contact_mu": rec.mu, "contact_alpha_n": rec.alpha_n,
              "contact_k_s": rec.k_s, "granular_skin": rec.skin, "solid_kind": rec.solid_kind,
              "solid_dofs": rec.solid_dofs, "solid_elements": 0 if rec.elements is None else len(rec.elements),
-             "solid_recipe": rec.solid_recipe, "solid_matrices_sha256": rec.solid_digest}
+             "solid_recipe": rec.solid_recipe, "solid_matrices_sha256": rec.solid_digest,
+             "gravity": [float(g) for g in rec.gravity]}
     return data, attrs
 
 
@@ -290,12 +294,27 @@ def read_record(ds, name="result") -> ResultModel:
     if np.any((strikers < 0) | (strikers >= n)):
         raise bad("a striker's granule is out of range")
     mu, alpha_n, k_s, skin = law
+    gravity = _gravity_of(attrs, bad)
     return ResultModel(labels=labels, media=media, medium_index=np.array([media.index(m) for m in names], np.int64),
                        position0=f("granule_position0"), radius=f("granule_radius"), mass=f("granule_mass"),
                        inertia=f("granule_inertia"), E=f("granule_modulus"), nu=f("granule_poisson"), mu=mu,
                        alpha_n=alpha_n, k_s=k_s, skin=skin, walls=walls, contacts=contacts, solid_kind=kind,
                        solid_dofs=dofs, solid_recipe=recipe, solid_digest=digest, nodes=nodes, elements=elements,
-                       mode_omega=omega, loads=loads, toward_solid=toward, strikers=tuple(int(g) for g in strikers))
+                       mode_omega=omega, loads=loads, toward_solid=toward, strikers=tuple(int(g) for g in strikers),
+                       gravity=gravity)
+
+
+def _gravity_of(attrs, bad) -> tuple[float, float]:
+    """The recorded acceleration of gravity ((0, 0) for a result that predates it)."""
+    if "gravity" not in attrs:
+        return 0.0, 0.0
+    try:
+        g = np.asarray(attrs["gravity"], float).reshape(2)
+    except (TypeError, ValueError):
+        raise bad("attribute gravity is not two numbers") from None
+    if not np.isfinite(g).all():
+        raise bad("attribute gravity is not finite")
+    return float(g[0]), float(g[1])
 
 
 def _read_loads(ds, n: int, bad) -> tuple[LoadRecord, ...]:
@@ -349,10 +368,10 @@ def read_result(path, what: str = "result file"):
     `run.load_result` reads)."""
     from pathlib import Path
 
-    from .results import check_result_schema, read_netcdf_or
+    from .results import check_result_schema, read_netcdf_or, with_every_granule
 
     path = Path(path)
     ds = read_netcdf_or(path, ResultFileError, what)
     check_result_schema(ds, path)
     check_result_model(ds, read_record(ds, path), path)
-    return ds
+    return with_every_granule(ds)

@@ -131,7 +131,7 @@ def _with_code(e: Exception, code: int) -> Exception:
 RESULT_DIMS = {
     "x": ("time", "granule"), "y": ("time", "granule"), "theta": ("time", "granule"),
     "v_x": ("time", "granule"), "v_y": ("time", "granule"), "omega": ("time", "granule"),
-    "energy_solid": ("time",), "energy_solid_kinetic": ("time",), "energy_solid_potential": ("time",),
+    "energy_solid": ("time",), "energy_gravity": ("time",), "energy_solid_kinetic": ("time",), "energy_solid_potential": ("time",),
     "dissipated_viscous": ("time",), "dissipated_friction": ("time",), "input_work": ("time",),
     "balance_error": ("time",),
     "contact_force_normal": ("time", "contact"), "contact_force_tangential": ("time", "contact"),
@@ -160,9 +160,17 @@ RECORD_DIMS = {
 RESULT_DIMS.update(RECORD_DIMS)
 # the variables that hold names
 TEXT_VARIABLES = ("medium", "wall_medium", "load_kind")
+# the granules' states: along `granule` (every granule) or `traced` (a few, simulation.outputs.granules)
+STATE_VARIABLES = ("x", "y", "theta", "v_x", "v_y", "omega")
 # what every result holds, finite at every output
-RESULT_REQUIRED = ("x", "y", "theta", "v_x", "v_y", "omega", "energy_solid", "dissipated_viscous",
-                   "dissipated_friction", "input_work", "balance_error")
+RESULT_REQUIRED = ("energy_solid", "dissipated_viscous", "dissipated_friction", "input_work", "balance_error")
+# the groups of variables a run may leave out (simulation.outputs), by the setting that does
+OPTIONAL_GROUPS = {
+    "simulation.outputs.contacts": ("contact_force_normal", "contact_force_tangential", "lambda_max"),
+    "simulation.outputs.walls": ("wall_force_normal", "wall_force_tangential"),
+    "simulation.outputs.steps": ("step_time", "step_dt", "step_iterations", "step_lambda"),
+    "simulation.outputs.solid": ("solid_time", "solid_eta", "solid_eta_dot", "mode_omega", "solid_x", "solid_v"),
+}
 
 
 def check_result_schema(ds, name) -> None:
@@ -179,14 +187,19 @@ def check_result_schema(ds, name) -> None:
     if missing:
         raise bad(f"not a granel result (no {', '.join(missing)})")
     for v, dims in RESULT_DIMS.items():
-        if v in ds.variables and tuple(ds[v].dims) != dims:
+        if v in ds.variables and tuple(ds[v].dims) != dims and not (v in STATE_VARIABLES and tuple(ds[v].dims) == ("time", "traced")):
             raise bad(f"damaged result ({v} has dimensions {tuple(ds[v].dims)}, a result's are {dims})")
+    states = [v for v in STATE_VARIABLES if v in ds.variables]
+    if states and len(states) != len(STATE_VARIABLES):
+        raise bad(f"damaged result ({', '.join(states)} without {', '.join(v for v in STATE_VARIABLES if v not in states)})")
+    if states and len({tuple(ds[v].dims) for v in states}) > 1:
+        raise bad("damaged result (the granules' states have different dimensions)")
     if ds.sizes.get("time", 0) < 1 or ds.sizes.get("granule", 0) < 1:
         raise bad("damaged result (no output time or no granule)")
     for v in RESULT_DIMS:
         if v in ds.variables and ds[v].dtype.kind not in "fiu" and v not in TEXT_VARIABLES:
             raise bad(f"damaged result ({v} is not numeric: {ds[v].dtype})")
-    for v in RESULT_REQUIRED + ("time",):
+    for v in RESULT_REQUIRED + tuple(states) + ("time",):
         values = np.asarray(ds[v].values, float)
         if not np.all(np.isfinite(values)):
             k = int(np.argmax(~np.isfinite(values).reshape(values.shape[0], -1).all(axis=1)))
@@ -197,6 +210,10 @@ def check_result_schema(ds, name) -> None:
     labels = [str(g) for g in ds["granule"].values]
     if len(set(labels)) != len(labels):
         raise bad("damaged result (a granule label repeats)")
+    if "traced" in ds.dims:
+        traced = [str(g) for g in ds["traced"].values] if "traced" in ds.variables else []
+        if len(traced) != ds.sizes["traced"] or not set(traced) <= set(labels) or len(set(traced)) != len(traced):
+            raise bad("damaged result (its traced granules are not distinct granules of the result)")
     for group in (("solid_eta", "solid_eta_dot", "mode_omega"), ("solid_x", "solid_v")):
         present = [v for v in group if v in ds.variables]
         if present and len(present) != len(group):
@@ -223,21 +240,38 @@ class ResultSpec:
     data: dict
     coords: dict
     attrs: dict
+    compression: int = 0  # gzip level of the file's large arrays (0: none)
+
+    def __contains__(self, name) -> bool:
+        return name in self.data or name in self.coords
 
     def __getitem__(self, name: str):
         dims, values = (self.data.get(name) or self.coords[name])[:2]
         return SimpleNamespace(values=np.asarray(values), dims=(dims,) if isinstance(dims, str) else tuple(dims))
 
     def to_dataset(self):
+        """The Dataset, its large arrays encoded as `write_spec_netcdf` writes them (`write_netcdf`
+        keeps the compression)."""
         import xarray as xr
 
-        return xr.Dataset(self.data, coords=self.coords, attrs=self.attrs)
+        ds = xr.Dataset(self.data, coords=self.coords, attrs=self.attrs)
+        if self.compression:
+            for name, v in ds.data_vars.items():
+                if v.dtype.kind in "fiu" and v.size >= COMPRESS_FROM:
+                    v.encoding.update(zlib=True, complevel=self.compression, shuffle=True)
+        return ds
+
+
+# arrays smaller than this stay contiguous and uncompressed: a chunk index costs more than it saves
+COMPRESS_FROM = 4096
 
 
 def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
     """Write a `ResultSpec` atomically as the NetCDF file xarray would write for its Dataset
     (dimension scales, NaN fill values of floating variables, the non-index coordinates named in
-    each variable's `coordinates` attribute), with h5netcdf alone."""
+    each variable's `coordinates` attribute), with h5netcdf alone. Numeric arrays of at least
+    `COMPRESS_FROM` values are chunked (h5netcdf's heuristic) and compressed at the spec's gzip
+    level, bytes shuffled first (docs/performance.md, "Result files")."""
     import h5netcdf
     import h5py
 
@@ -262,7 +296,10 @@ def write_spec_netcdf(spec: ResultSpec, path: str | Path) -> Path:
                 v[...] = values.astype(str).astype(object)
             else:
                 fill = {"fillvalue": np.array(np.nan, values.dtype)} if values.dtype.kind == "f" else {}
-                v = f.create_variable(name, dims, dtype=values.dtype, **fill)
+                packed = {}
+                if spec.compression and values.size >= COMPRESS_FROM:
+                    packed = {"compression": "gzip", "compression_opts": spec.compression, "shuffle": True}
+                v = f.create_variable(name, dims, dtype=values.dtype, **fill, **packed)
                 if values.size:
                     v[...] = values
                 if fill:
@@ -295,3 +332,61 @@ def _netcdf_to(path, buffer: io.BytesIO) -> Path:
 def wall_names(system) -> list[str]:
     """A name for each rigid wall: its own (e.g. SSGM:top), else wall k."""
     return [w.name or f"wall {k}" for k, w in enumerate(system.walls)]
+
+
+def with_every_granule(ds):
+    """A result Dataset whose granules' states are stored along `traced` (a few granules,
+    simulation.outputs.granules), with them along `granule` as every reader indexes them: NaN for
+    the granules not traced (in memory only). Any other result is returned as it is."""
+    if "traced" not in ds.dims or "x" not in ds.variables:
+        return ds
+    labels = {str(g): k for k, g in enumerate(ds["granule"].values)}
+    cols = [labels[str(g)] for g in ds["traced"].values]
+    full = {}
+    for v in STATE_VARIABLES:
+        values = np.full((ds.sizes["time"], ds.sizes["granule"]), np.nan, ds[v].dtype)
+        values[:, cols] = ds[v].values
+        full[v] = (("time", "granule"), values, ds[v].attrs)
+    return ds.drop_vars(list(STATE_VARIABLES) + ["traced"]).assign(full)
+
+
+def require(ds, names, what: str) -> None:
+    """ResultFileError (code 2) naming the first of `names` (variables) the result does not
+    store, `what` needs it, and the setting that left it out (simulation.outputs)."""
+    for name in names:
+        if name in ds.variables:
+            continue
+        setting = next((s for s, group in OPTIONAL_GROUPS.items() if name in group), None)
+        why = f"this result was run with {setting} = false" if setting else "this result does not store it"
+        raise ResultFileError(f"{what} needs {name}: {why}", 2)
+
+
+def require_states(ds, what: str, granules=None) -> None:
+    """ResultFileError (code 2) unless the result stores the state (x, y, theta, v_x, v_y, omega)
+    of the granules `granules` (indices; None: every granule), naming the first missing one and
+    the setting (simulation.outputs.granules). A result read by `with_every_granule` holds NaN
+    for the granules it did not trace."""
+    if "x" not in ds.variables:
+        raise ResultFileError(f"{what} needs the granules' states (x, y, v_x, ...): this result was run with "
+                              "simulation.outputs.granules = \"none\"", 2)
+    dims = ds["x"].dims
+    if "traced" in dims:
+        raise ResultFileError(f"{what} needs the granules' states along `granule`: read the result with "
+                              "io.results.with_every_granule", 2)
+    stored = np.isfinite(np.asarray(ds["x"].values[0], float))
+    wanted = np.arange(len(stored)) if granules is None else np.atleast_1d(np.asarray(granules, int))
+    missing = [int(g) for g in wanted if not stored[g]]
+    if missing:
+        labels = ds["granule"].values
+        traced = [str(labels[k]) for k in np.flatnonzero(stored)]
+        shown = ", ".join(traced[:4]) + (", ..." if len(traced) > 4 else "")
+        need = "every granule's state" if granules is None else f"the state of granule {labels[missing[0]]}"
+        raise ResultFileError(f"{what} needs {need}: this result traces only {len(traced)} granule"
+                              f"{'s' if len(traced) != 1 else ''} ({shown}; simulation.outputs.granules)", 2)
+
+
+def granule_column(ds, label: str, what: str) -> int:
+    """The index of granule `label` along `granule`, once `require_states` has found its state."""
+    g = [str(x) for x in ds["granule"].values].index(str(label))
+    require_states(ds, what, [g])
+    return g

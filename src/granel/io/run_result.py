@@ -21,7 +21,9 @@ def base_attrs(scenario_toml: str, solver: dict) -> dict:
 def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
     """The result of a run (see the README for the names) from its `Trajectory`, its granular
     system and its solid model, with the model record (`io.model`), as a `ResultSpec` (`omega`:
-    the natural frequencies of the modal coordinates, if the solid state is modal)."""
+    the natural frequencies of the modal coordinates, if the solid state is modal). Only what the
+    trajectory kept (`Trajectory.stored`) is written: the states of a few traced granules go along
+    a `traced` dimension; the energies, the balance and the model record are always there."""
     t = traj.times
     r = traj.series
     nt = len(t)
@@ -33,18 +35,29 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         "contact": ("contact", np.array(names, dtype=object)),
         "wall": ("wall", np.array(wall_names(system), dtype=object)),
     }
-    pos, vel = r("pos"), r("vel")
-    data = {
-        "x": (("time", "granule"), pos[:, :, 0], {"units": "m", "long_name": "centre x"}),
-        "y": (("time", "granule"), pos[:, :, 1], {"units": "m", "long_name": "centre y"}),
-        "theta": (("time", "granule"), r("theta"), {"units": "rad"}),
-        "v_x": (("time", "granule"), vel[:, :, 0], {"units": "m/s"}),
-        "v_y": (("time", "granule"), vel[:, :, 1], {"units": "m/s"}),
-        "omega": (("time", "granule"), r("omega"), {"units": "rad/s"}),
-    }
+    keep = traj.stored
+    data = {}
+    if keep.traced is None or len(keep.traced):
+        dim = "granule"
+        if keep.traced is not None:  # the traces of a few granules, along their own dimension
+            dim = "traced"
+            coords["traced"] = ("traced", np.array([system.labels[k] for k in keep.traced], dtype=object))
+        pos, vel = r("pos"), r("vel")
+        data.update({
+            "x": (("time", dim), pos[:, :, 0], {"units": "m", "long_name": "centre x"}),
+            "y": (("time", dim), pos[:, :, 1], {"units": "m", "long_name": "centre y"}),
+            "theta": (("time", dim), r("theta"), {"units": "rad"}),
+            "v_x": (("time", dim), vel[:, :, 0], {"units": "m/s"}),
+            "v_y": (("time", dim), vel[:, :, 1], {"units": "m/s"}),
+            "omega": (("time", dim), r("omega"), {"units": "rad/s"}),
+        })
     em = r("energy_media").reshape(nt, -1)
     for k, name in enumerate(system.media):
         data[f"energy_{name.lower()}"] = ("time", em[:, k], {"units": "J", "long_name": f"energy of {name}, eq. (11)"})
+    if system.has_gravity:
+        data["energy_gravity"] = ("time", r("energy_gravity").astype(float),
+                                  {"units": "J", "long_name": "the granules' gravitational potential energy, "
+                                   "-sum m g . (x - x as built)"})
     for key, long in (
         ("energy_solid", "solid energy 1/2 v'Mv + 1/2 x'Kx, eq. (11)"),
         ("energy_solid_kinetic", "solid kinetic energy 1/2 v'Mv"),
@@ -52,12 +65,14 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
         ("dissipated_viscous", "work of viscous contact forces, eq. (12)"),
         ("dissipated_friction", "work of friction forces, eq. (12)"),
         ("input_work", "work of the applied forces"),
-        ("balance_error", "E_solid + E_granular + D - input work, eq. (13), minus its value at t = 0"),
+        ("balance_error", "E_solid + E_granular (+ E_gravity) + D - input work, eq. (13), minus its value at t = 0"),
     ):
         data[key] = ("time", r(key).astype(float), {"units": "J", "long_name": long})
     for key, long in (("normal", "normal force on the solid (along n_ik)"), ("tangential", "tangential force on the solid (along t_ik = k x n_ik)")):
-        data[f"contact_force_{key}"] = (("time", "contact"), r(f"force_{key}").astype(float).reshape(nt, -1), {"units": "N", "long_name": long})
-    if "wall_force" in traj.names and system.walls:
+        if keep.contacts:
+            data[f"contact_force_{key}"] = (("time", "contact"), r(f"force_{key}").astype(float).reshape(nt, -1),
+                                            {"units": "N", "long_name": long})
+    if "wall_force" in traj.names and system.walls and keep.walls:
         fw = r("wall_force").astype(float).reshape(nt, len(system.walls), 2)
         nrm = np.array([np.asarray(w.normal, float) / np.hypot(*w.normal) for w in system.walls])
         tan = np.array([(np.asarray(w.p1, float) - w.p0) / np.hypot(*(np.asarray(w.p1, float) - w.p0)) for w in system.walls])
@@ -65,12 +80,19 @@ def trajectory_spec(traj, system, model, attrs: dict, omega=None) -> ResultSpec:
                                      {"units": "N", "long_name": "force pressing each rigid wall (along -n, n into the granules)"})
         data["wall_force_tangential"] = (("time", "wall"), np.einsum("kwi,wi->kw", fw, tan),
                                          {"units": "N", "long_name": "force on each rigid wall along it (p0 -> p1)"})
-    data.update(_step_variables(traj, t, len(names)))
-    if model.ndof:
+    steps = _step_variables(traj, t, len(names))
+    if not keep.contacts:
+        del steps["lambda_max"]
+    if not keep.steps:
+        steps = {k: v for k, v in steps.items() if not k.startswith("step_")}
+    data.update(steps)
+    if model.ndof and keep.solid:
         data.update(_solid_variables(traj, omega))
     record, record_attrs = record_entries(model_record(system, model))
     data.update(record)
-    return ResultSpec(data, coords, {**attrs, **record_attrs})
+    stored = {"outputs_granules": "all" if keep.traced is None else f"{len(keep.traced)} traced",
+              "outputs_left_out": " ".join(g for g in ("contacts", "walls", "steps", "solid") if not getattr(keep, g))}
+    return ResultSpec(data, coords, {**attrs, **record_attrs, **stored}, compression=keep.compression)
 
 
 def _step_variables(traj, times: np.ndarray, nc: int) -> dict:

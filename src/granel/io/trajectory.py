@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-GRANULAR = ("pos", "theta", "vel", "omega", "energy_media", "energy_solid", "energy_solid_kinetic", "energy_solid_potential",
+GRANULAR = ("pos", "theta", "vel", "omega", "energy_media", "energy_gravity", "energy_solid", "energy_solid_kinetic", "energy_solid_potential",
             "dissipated_viscous", "dissipated_friction", "input_work", "balance_error", "force_normal", "force_tangential", "wall_force")
+STATE = ("pos", "theta", "vel", "omega")  # per granule: kept for the traced granules only
 STEPS = ("t", "h", "iterations", "lam")
 STEP_TYPES = {"t": float, "h": float, "iterations": np.int64, "lam": np.float32}
 
@@ -23,6 +24,23 @@ def _join(blocks: list, dtype=None) -> np.ndarray:
     if not blocks:
         return np.zeros(0, dtype or float)
     return np.concatenate(blocks).astype(dtype, copy=False) if dtype else np.concatenate(blocks)
+
+
+@dataclass(frozen=True)
+class Stored:
+    """What a run keeps and its result file stores (`scenario.schema.OutputsSpec`): the indices of
+    the granules whose state is kept (None: all), the groups of variables, and the gzip level."""
+
+    traced: tuple | None = None
+    contacts: bool = True
+    walls: bool = True
+    steps: bool = True
+    solid: bool = True
+    compression: int = 0
+
+    @property
+    def every_granule(self) -> bool:
+        return self.traced is None
 
 
 @dataclass
@@ -34,12 +52,21 @@ class Trajectory:
     _steps: dict = field(default_factory=lambda: {k: [] for k in STEPS})
     solver: dict = field(default_factory=dict)  # settings and counters, for the result's attributes
     watch: object = None  # called with the latest step time whenever a solver logs steps (progress, wall limit)
+    stored: Stored = Stored()  # what is kept: the state of the traced granules only
+
+    def keep(self, stored: Stored) -> "Trajectory":
+        self.stored = stored
+        return self
 
     def record_block(self, times, obs: dict) -> None:
         """Outputs at `times` (K,), each entry of `obs` an array whose first axis has length K."""
         self._times.append(np.asarray(times, float))
+        traced = self.stored.traced
         for k, v in obs.items():
-            self._rec[k].append(np.asarray(v))
+            v = np.asarray(v)
+            if k in STATE and traced is not None:
+                v = v[:, list(traced)]
+            self._rec[k].append(v)
 
     def record_solid_block(self, times, snap: dict) -> None:
         self._solid_times.append(np.asarray(times, float))

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..coupling.driver import Guards, Schedule
+from ..io.trajectory import Stored
 from ..coupling.settings import LARGE_SOLID_MODES, SolverSettings
 from ..granular.packing import Placement, Wall, chain, hexagonal_columns, medium_from_table
 from ..guard.reading import InputFileError
@@ -152,6 +153,7 @@ def build_granular(sc: Scenario, base: Path | None = None):
         vel[g] = iv.v
         om[g] = iv.omega
     system.strikers = tuple(labels.index(iv.granule) for iv in sc.initial_velocities)
+    system.gravity = (float(sc.gravity[0]), float(sc.gravity[1]))
     return system, initial_state(system, vel, om), media
 
 
@@ -335,6 +337,24 @@ def solver_settings(sc: Scenario) -> SolverSettings:
                           max_step=sim.max_step, mode_cutoff=sim.mode_cutoff, ledger_tol=sim.ledger_tol, modes=sim.modes)
 
 
+def stored(sc: Scenario, system) -> Stored:
+    """What the run keeps and stores (simulation.outputs), the traced granules by label; an
+    unknown label is a ScenarioError naming it."""
+    out = sc.simulation.outputs
+    traced = None
+    if out.granules == "none":
+        traced = ()
+    elif out.granules != "all":
+        index = {label: k for k, label in enumerate(system.labels)}
+        unknown = [g for g in out.granules if g not in index]
+        if unknown:
+            shown = ", ".join(system.labels[:3]) + (", ..." if len(system.labels) > 3 else "")
+            raise ScenarioError(f"simulation.outputs.granules: no granule {unknown[0]!r} in this scenario (its labels: {shown})")
+        traced = tuple(sorted(index[g] for g in out.granules))
+    return Stored(traced=traced, contacts=out.contacts, walls=out.walls, steps=out.steps, solid=out.solid,
+                  compression=out.compression)
+
+
 def schedule(sc: Scenario) -> Schedule:
     sim = sc.simulation
     return Schedule(sim.duration, sim.dt, sim.output_every, sim.solid_output_every, sim.checkpoint_every)
@@ -349,7 +369,9 @@ def build_problem(sc: Scenario) -> Problem:
     """Everything a solver needs, built from the validated scenario."""
     text = to_toml(sc)
     system, state, _ = build_granular(sc, sc.base)
+    keep = stored(sc, system)  # checked before any computation
     solid = build_solid(sc, system)
+    system.with_solid_contacts_moved(solid_sag(solid, system.gravity))
     force0, report, table = None, None, None
     if sc.simulation.equilibrate:
         force0, report, table = equilibrate(system, state, solid)
@@ -364,7 +386,16 @@ def build_problem(sc: Scenario) -> Problem:
     return Problem(system=system, state=state, solid=solid, settings=settings, schedule=schedule(sc), source=text,
                    guards=guards, solid_force0=force0, equilibrium=report, equilibrium_contacts=table,
                    inputs=input_digests(sc), input_texts=input_texts(sc), scales=scales,
-                   kinks=tuple(load_kinks(system)), max_modes=max_modes)
+                   kinks=tuple(load_kinks(system)), max_modes=max_modes, stored=keep)
+
+
+def solid_sag(solid: SolidModel, gravity) -> np.ndarray:
+    """(nc, 2) how far the solid's own weight moves its contact points [m] (`SolidModel.sag`); a
+    ScenarioError naming `gravity` if the solid's supports do not hold its weight."""
+    try:
+        return solid.sag(gravity)
+    except ValueError as e:
+        raise ScenarioError(f"gravity = [{gravity[0]:g}, {gravity[1]:g}]: {e}") from None
 
 
 def equilibrate(system, state, solid):

@@ -3,10 +3,11 @@ that a mistyped count or duration is refused with its estimate (`guard.resources
 ending in a MemoryError, a swap storm or a disk full of a partial result.
 
 The model counts what granel keeps in memory: each granule's arrays and contact lists, the state
-of every output (six numbers a granule, held twice: while running and in the result), every
+of every output (six numbers a stored granule, held twice: while running and in the result), every
 accepted step's record (a fixed step's count is exact; an adaptive run takes at least
 duration / max_step), the solid's assembled matrices and, up to `solid.modal.DENSE_LIMIT`
-degrees of freedom, its dense eigen-solution and the modal state of every solid output."""
+degrees of freedom, its dense eigen-solution and the modal state of every solid output; the
+result file what `simulation.outputs` keeps, uncompressed (compression only makes it smaller)."""
 
 from __future__ import annotations
 
@@ -75,9 +76,13 @@ def run_needs(sc: Scenario, granules: int | None = None) -> Needs:
     solid_every = sim.solid_output_every or sim.output_every
     solid_outputs = int(min(sim.duration / solid_every, 1e18)) + 1 if ndof else 0
     modal = ndof if ndof <= DENSE_LIMIT else 0
-    memory = (n * BYTES_PER_GRANULE + outputs * n * BYTES_PER_GRANULE_OUTPUT + steps * 2 * (4 + contacts) * 8
+    kept = sim.outputs  # what the run keeps and stores (simulation.outputs)
+    traced = n if kept.granules == "all" else 0 if kept.granules == "none" else len(kept.granules)
+    solid_outputs *= kept.solid
+    memory = (n * BYTES_PER_GRANULE + outputs * traced * BYTES_PER_GRANULE_OUTPUT + steps * 2 * (4 + contacts) * 8
               + nel * BYTES_PER_ELEMENT + 3.0 * modal * modal * 8 + solid_outputs * max(modal, ndof) * 2 * (8 + 4))
-    result = RESULT_OVERHEAD + outputs * (n * 6 * 8 + 16 * 8) + steps * (4 + contacts) * 8 + solid_outputs * max(modal, ndof) * 2 * 4
+    result = (RESULT_OVERHEAD + outputs * (traced * 6 * 8 + 16 * 8 + kept.contacts * contacts * 3 * 8)
+              + kept.steps * steps * (4 + contacts) * 8 + solid_outputs * max(modal, ndof) * 2 * 4)
     return Needs(n, outputs, steps, ndof, float(memory), float(result))
 
 

@@ -70,6 +70,33 @@ class _Strict(BaseModel):
         return data
 
 
+class OutputsSpec(_Strict):
+    """What a run's result file stores (README, "Results"): the energies and the balance (13) are
+    always there; each group below can be left out, and the file is compressed."""
+
+    granules: Union[Literal["all", "none"], list[str]] = Field(
+        "all", description="the granules whose state (x, y, theta, v_x, v_y, omega) is stored at every output: all, none, "
+        "or a list of labels (e.g. [\"A:1\", \"A:30\"]), stored along a `traced` dimension")
+    contacts: bool = Field(True, description="the forces on the solid at each contact and the largest friction "
+                           "eigenvalue between outputs (contact_force_*, lambda_max)")
+    walls: bool = Field(True, description="the forces on each rigid wall (wall_force_*)")
+    steps: bool = Field(True, description="the record of every accepted step (step_time, step_dt, step_iterations, step_lambda)")
+    solid: bool = Field(True, description="the solid's state at its outputs (solid_eta, solid_eta_dot or solid_x, solid_v; "
+                        "granel wavefield and the solid's figures need it)")
+    compression: int = Field(1, ge=0, le=9, description="gzip level of the result file's arrays, with byte shuffling (0: "
+                             "none); measured on the paper's run: docs/performance.md")
+
+    @field_validator("granules")
+    @classmethod
+    def _labels(cls, v):
+        if isinstance(v, list):
+            if not v:
+                raise ValueError("an empty list: give labels, or \"none\"")
+            if len(set(v)) != len(v):
+                raise ValueError(f"a label repeats: {sorted(x for x in set(v) if v.count(x) > 1)[0]!r}")
+        return v
+
+
 class SimulationSpec(_Strict):
     duration: float = 8e-4
     dt: float = 4e-8
@@ -96,6 +123,7 @@ class SimulationSpec(_Strict):
     equilibrate: bool = Field(False, description="start from the static equilibrium of the constant loads (preloads), granules and solid (granular.static)")
     balance_limit: float = Field(1e-2, gt=0, description="stop (exit 3) when the energy balance (13) is off by more than this share of the energy put in")
     overlap_limit: float = Field(0.1, gt=0, description="stop (exit 3) when a contact overlaps by more than this share of the smaller radius")
+    outputs: OutputsSpec = Field(default_factory=OutputsSpec, description="what the result file stores")
 
     @field_validator("duration", "dt", "output_every", "checkpoint_every", "solid_output_every", "max_step", mode="before")
     @classmethod
@@ -424,6 +452,10 @@ class InitialVelocitySpec(_Strict):
     omega: float = 0.0
 
 
+# the largest |component| of gravity a scenario may give [m/s^2]: 10^4 g, beyond any centrifuge
+GRAVITY_MAX = 1e5
+
+
 class Scenario(_Strict):
     name: str = "scenario"
     description: str = ""
@@ -435,6 +467,9 @@ class Scenario(_Strict):
     walls: list[WallSpec] = Field(default_factory=list)
     excitations: list[ExcitationSpec] = Field(default_factory=list)
     initial_velocities: list[InitialVelocitySpec] = Field(default_factory=list)
+    gravity: tuple[Annotated[float, Field(ge=-GRAVITY_MAX, le=GRAVITY_MAX)], Annotated[float, Field(ge=-GRAVITY_MAX, le=GRAVITY_MAX)]] = Field(
+        (0.0, 0.0), description="the acceleration of gravity in the granular plane (x, y) [m/s^2], on every granule and "
+        "on the solid, e.g. [0, -9.81] (default: none)")
     _base: Path | None = PrivateAttr(None)  # directory that relative file paths refer to
 
     @property

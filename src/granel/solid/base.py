@@ -47,6 +47,11 @@ class ContactPoint:
     dof_rotation: int = -1
 
 
+# the largest |K q - W g| / |W g| of a solid's sag: far above a factorisation's round-off for a
+# held solid (its condition number times eps), far below a singular one's
+SAG_RESIDUAL = 1e-6
+
+
 @dataclass
 class SolidModel:
     kind: str
@@ -62,6 +67,37 @@ class SolidModel:
     element_volume: np.ndarray | None = None
     full_displacement: object = None  # callable(q) -> (n_nodes, 2)
     recipe: object = None  # what it was built from (`solid.recipe.SolidRecipe`), if known
+    unit_weight: np.ndarray | None = None  # (ndof, 2) T' M_full e_x, T' M_full e_y: the weight per m/s^2
+
+    def unit_weights(self) -> np.ndarray:
+        """(ndof, 2): the generalised forces of the solid's own mass under a unit acceleration along x
+        and along y (T' M e with M its unreduced consistent mass), so that its weight is this @ g."""
+        if self.unit_weight is None:
+            return np.zeros((self.ndof, 2))
+        return self.unit_weight
+
+    def sag(self, gravity) -> np.ndarray:
+        """(nc, 2) how far the solid's own weight moves its contact points [m]: u = B K^-1 W g (the
+        static deflection, about which a linear solid's motion is the same as without its weight).
+        ValueError if its supports leave it free to move under its weight."""
+        nc, g = len(self.contacts), np.asarray(gravity, float)
+        if self.ndof == 0 or not g.any():
+            return np.zeros((nc, 2))
+        f = self.unit_weights() @ g
+        if not f.any():  # its weight acts only along directions it is held rigidly (a beam's axis)
+            return np.zeros((nc, 2))
+        from scipy.sparse.linalg import splu
+
+        free = ValueError(f"the {self.kind} is free to move under its own weight: nothing holds it (clamp an end, "
+                          "solid.clamped)")
+        try:
+            q = splu(self.K.tocsc()).solve(f)
+        except RuntimeError:  # an exactly singular stiffness
+            raise free from None
+        residual = np.linalg.norm(self.K @ q - f)
+        if not (np.isfinite(q).all() and residual <= SAG_RESIDUAL * np.linalg.norm(f)):
+            raise free
+        return (self.contact_map() @ q).reshape(nc, 2)
 
     @property
     def ndof(self) -> int:

@@ -87,7 +87,11 @@ def build_beam(slab: Slab, material: Material, contacts, n_elements=40, clamped=
 
     info = {"dofs": int(len(keep)), "elements": int(n_elements), "nodes": int(nn), "EI": E * I, "rhoA": rho * A,
             "width": width, "thickness": thickness}
-    return SolidModel("beam", Mr, Kr, cps, info, T, nodes, elems, energies, np.full(n_elements, A * l), full)
+    model = SolidModel("beam", Mr, Kr, cps, info, T, nodes, elems, energies, np.full(n_elements, A * l), full)
+    across = np.zeros(N)
+    across[0::2] = 1.0  # a unit translation across the beam (x); along its axis it is held rigidly
+    model.unit_weight = np.column_stack([T.T @ (M @ across), np.zeros(len(keep))])
+    return model
 
 
 def clamped_clamped_periods(E, rho, width, thickness, length, count=5) -> np.ndarray:

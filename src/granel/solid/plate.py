@@ -251,7 +251,8 @@ def _save_plate(path, model: SolidModel, args) -> None:
     arrays = {"info": np.array(json.dumps(model.info)), "nodes": model.nodes, "elements": model.elements,
               "volume": model.element_volume, "node_dofs": model.node_dofs,
               "contacts": np.array(json.dumps([c.__dict__ for c in model.contacts])),
-              "family": np.array(repr(_scale_free_args(args))), "scales": np.array([thickness, E, rho], float)}
+              "family": np.array(repr(_scale_free_args(args))), "scales": np.array([thickness, E, rho], float),
+              "unit_weight": model.unit_weights()}
     for name, A in (("M", model.M), ("K", model.K), ("T", model.T)):
         A = A.tocsr()
         arrays.update({f"{name}_data": A.data, f"{name}_indices": A.indices, f"{name}_indptr": A.indptr,
@@ -305,6 +306,7 @@ def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]
             contacts = [ContactPoint(**{**c, "position": tuple(c["position"]), "normal": tuple(c["normal"])})
                         for c in json.loads(str(z["contacts"]))]
             nodes, elements, volume, node_dofs = z["nodes"], z["elements"], z["volume"], z["node_dofs"]
+            weight = z["unit_weight"] if "unit_weight" in z.files else None  # (a cache of an earlier granel: none)
             if scales is not None:
                 if str(z["family"]) != repr(_scale_free_args(args)):
                     return None, None
@@ -313,12 +315,14 @@ def _load_plate(path, args, scales=None) -> tuple[SolidModel | None, str | None]
                     return None, None
                 mats["K"] = mats["K"] * ((E * h) / (E0 * h0))
                 mats["M"] = mats["M"] * ((rho * h) / (rho0 * h0))
+                weight = None if weight is None else weight * ((rho * h) / (rho0 * h0))
                 volume = volume * (h / h0)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as e:  # matches its record
         return None, f"{path.name} cannot be read ({type(e).__name__})"
     touch(path)  # recently used: pruned last
     model = CachedPlate("plate", mats["M"], mats["K"], contacts, info, mats["T"], nodes, elements, None, volume, None)
     model.node_dofs = node_dofs
+    model.unit_weight = weight
     model.full_displacement = model.full
     model.element_energies = model.energies
     model.args = args
@@ -339,6 +343,9 @@ class CachedPlate(SolidModel):
 
     def energies(self, q, v):
         return self._assembled().element_energies(q, v)
+
+    def unit_weights(self):
+        return self.unit_weight if self.unit_weight is not None else self._assembled().unit_weights()
 
     def _assembled(self) -> SolidModel:
         if getattr(self, "_full_model", None) is None:
@@ -447,6 +454,7 @@ def assemble_plate(slab: Slab, material: Material, layers: list[LayerSpec], mesh
     info = {"dofs": int(nred), "elements": int(mesh.t.shape[1]), "nodes": int(len(nodes)), "nx": nx,
             "ny": int(mesh.t.shape[1] // nx), "full_dofs": int(N), "rigid_layers": bool(rigid_layers)}
     model = SolidModel("plate", Mr, Kr, contacts, info, T, nodes, elem, energies, vol, full)
+    model.unit_weight = np.column_stack([T.T @ (M @ (comp == 0).astype(float)), T.T @ (M @ (comp == 1).astype(float))])
     model.basis = basis
     model.node_dofs = np.vstack([node_dofx, node_dofy])
     return model

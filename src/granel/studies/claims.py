@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..analysis.balance import relative_balance_error
+from ..io.results import require
 from ..analysis.modal import modes_for_fraction, time_averaged_shares
 from ..analysis.reciprocity import arrival_time, directed_velocity, excitation_of
 from ..analysis.signals import dominant_frequency, peak_time, peak_width, zero_crossing_frequency
@@ -118,13 +119,14 @@ def construction_facts(ds) -> dict:
     from ..granular.scales import load_scales
     from ..granular.system import initial_state
     from ..io.model import read_record
-    from ..io.results import ResultFileError
+    from ..io.results import ResultFileError, require_states
 
     out = {"balance_bound_rel": float("nan"), "ledger_tol": float("nan"), "mirror_symmetric": False}
     try:
         rec, system = read_record(ds), result_system(ds)
     except (ResultFileError, KeyError, ValueError, OSError):
         return out
+    require_states(ds, "the paper's balance claims")
     first = ds.isel(time=0)
     state = initial_state(system, np.stack([first["v_x"].values, first["v_y"].values], axis=1), first["omega"].values)
     a = ds.attrs
@@ -228,6 +230,7 @@ def measurements(runs: dict) -> dict:
 def fig11_measures(ds, window: float) -> dict:
     """Fig. 11 from a run of the paper's algorithm: the largest |lambda| (A9) at each of the six
     tracked contacts within the window, and the smallest step (B1) taken."""
+    require(ds, ["step_time", "step_lambda", "step_dt"], "Fig. 11")
     t = ds["step_time"].values
     sel = t <= window * (1 + 1e-9)
     names = list(ds["contact"].values)

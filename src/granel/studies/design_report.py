@@ -174,7 +174,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io.results import read_netcdf
+    from ..io.results import read_netcdf, require
 
     mode = study_mode(spec.mode)
     if len(rows) < 2 or rows[1]["tight"].get("status") != "ok" or rows[0]["tight"].get("status") != "ok":
@@ -190,6 +190,7 @@ def best_figure(spec: DesignSpec, base_dir: Path, rows: list[dict], out: Path) -
             w = mode.energy_scale(ds)
             run = path.stem.split("__", 1)[1]
             label = f"{r['label']}, {run}"
+            require(ds, ["wall_force_normal"] if walls_matter else ["v_x"], f"the design report's figure ({path.name})")
             if walls_matter:
                 axes[1, 0].plot(t, ds["wall_force_normal"].values.max(axis=1), ls=ls, lw=1, label=label)
             else:

@@ -10,7 +10,7 @@ from .. import run as R
 from .. import scenario as S
 from ..analysis.reciprocity import reciprocity_metrics
 from ..guard.exits import NotWritten
-from ..io.results import write_netcdf
+from ..io.results import with_every_granule, write_netcdf
 from ..viz.figures import fig3_velocities
 
 
@@ -41,7 +41,7 @@ def run_reciprocity(scenarios: dict[str, S.Scenario], out: Path, running=None) -
             write_netcdf(ds, path)
         except OSError as e:
             raise NotWritten("the run", path, e) from e
-        runs[excited] = ds
+        runs[excited] = with_every_granule(ds)
     forward, backward = runs.values()
     metrics = reciprocity_metrics(forward, backward)
     try:

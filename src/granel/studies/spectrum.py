@@ -133,11 +133,11 @@ def touching_wall(ds, label: str, direction) -> int | None:
     segment, its overlap above -ROUND_OFF of its radius, `granular.geometry`), the most nearly
     along `direction` of them; None when it touches none. Read from the result's model record."""
     from ..granular.geometry import ROUND_OFF
+    from ..io.results import granule_column
 
     if not ds.sizes.get("wall", 0):
         return None
-    labels = [str(g) for g in ds["granule"].values]
-    g = labels.index(label)
+    g = granule_column(ds, label, "finding the wall a granule touches")
     medium = str(ds["medium"].values[g])
     p = np.array([ds["x"].values[0, g], ds["y"].values[0, g]])
     R = float(ds["granule_radius"].values[g])
@@ -161,16 +161,16 @@ def run_measures(ds, measured: str, window_cycles: float) -> dict:
     from ..analysis.balance import relative_balance_error
     from ..analysis.narrowband import drive_of, harmonic_amplitudes, response_period, steady_window
     from ..analysis.reciprocity import pushed_along
+    from ..io.results import granule_column, require
 
     drive = drive_of(ds)
     f, F = drive.frequency, abs(drive.amplitude)
     T = 1.0 / f
     t = ds["time"].values
-    labels = list(ds["granule"].values)
 
     def along(label):
         d = pushed_along(ds, label)
-        g = labels.index(label)
+        g = granule_column(ds, label, "the harmonic measures")
         return ds["v_x"].values[:, g] * d[0] + ds["v_y"].values[:, g] * d[1]
 
     hi = t[-1]
@@ -178,12 +178,14 @@ def run_measures(ds, measured: str, window_cycles: float) -> dict:
     vb = along(measured)
     amps = harmonic_amplitudes(t, vb, f, orders=(1, 2, 3), subharmonics=(2,), window=window)
     va = harmonic_amplitudes(t, along(drive.granule), f, orders=(1,), subharmonics=(), window=window)["f"]
-    if "contact_force_normal" in ds and ds.sizes.get("contact", 0):
+    require(ds, ["contact_force_normal"] * bool(ds.sizes.get("contact", 0)), "the harmonic measures")
+    if ds.sizes.get("contact", 0):
         fs = harmonic_amplitudes(t, ds["contact_force_normal"].values.sum(axis=1), f, orders=(1,), subharmonics=(),
                                  window=window)["f"]
     else:
         fs = 0.0
     w = touching_wall(ds, measured, pushed_along(ds, measured))
+    require(ds, ["wall_force_normal"] * (w is not None), "the harmonic measures")
     fw = math.nan if w is None else harmonic_amplitudes(t, ds["wall_force_normal"].values[:, w], f, orders=(1,),
                                                          subharmonics=(), window=window)["f"]
     # the same transmissibility over the window before: how much it still changes (NaN if that window meets the ramp)

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from .. import __version__
 from .. import scenario as S
-from ..io.results import ResultFileError
+from ..io.results import ResultFileError, with_every_granule
 from .modes import ModeName, study_mode
 from .spectrum import SpectrumSpec
 
@@ -286,7 +286,7 @@ def _cached_run(path: Path, sc: S.Scenario):
         return None
     if decode(ds.attrs.get("input_files", "{}")) != S.input_digests(sc):
         return None
-    return ds
+    return with_every_granule(ds)
 
 
 def case_scenarios(spec: CaseSpec, base_dir: Path, case: dict, check_usage: bool = True) -> list[tuple[str, S.Scenario]]:
@@ -332,7 +332,7 @@ def run_case(spec_json: str, base_dir: str, case: dict, out_dir: str, keep_runs:
                 ds = run_scenario(sc)
                 if keep_runs:
                     write_netcdf(ds, path)
-            runs[key] = ds
+            runs[key] = with_every_granule(ds)
         measuring = time.perf_counter()
         res["metrics"], notes = mode.measure(spec, scenarios, runs)
         if notes:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..guard.exits import InputError
+from ..io.results import require
 
 FILES = ("wavefield.nc", "kt.png", "fk.png", "moments.png", "bands.png")
 MOVIE = "bands.mp4"
@@ -103,7 +104,8 @@ def read_wavefield_result(path) -> "xr.Dataset":
     if kind not in ("plate", "beam"):
         raise InputError(f"{path}: its solid is {kind or 'absent'}: a wavefield needs a plate or a beam "
                          "(run with --solid plate or --solid beam)")
-    if "solid_time" not in ds or ds.sizes.get("solid_time", 0) < 4:
+    require(ds, ["solid_time"], f"{path}: a wavefield")
+    if ds.sizes.get("solid_time", 0) < 4:
         raise InputError(f"{path}: {ds.sizes.get('solid_time', 0)} stored solid outputs; a wavefield needs 4 or more")
     if "solid_eta_dot" not in ds and "solid_v" not in ds:
         raise InputError(f"{path}: damaged result (solid_time without the solid's state: no solid_eta_dot or solid_v)")
@@ -274,6 +276,7 @@ def plan_wavefield(ds, options: WavefieldOptions, name="result") -> WavefieldPla
         default = "" if options.k_max is not None else " (the default, the elements' resolution limit)"
         raise InputError(f"--k-max {k_max:.4g}{default}: the moments need 2 or more of {name}'s wavenumbers, and its "
                          f"first two are {k[0]:.4g} and {k[1]:.4g} rad/m; give --k-max {k[1]:.4g} or more")
+    require(ds, ["solid_time"], f"granel wavefield ({name})")
     check_window(options, ds["solid_time"].values, name)
     if "mode_omega" in ds:  # the modal energy takes the stored frequencies with the solid's own shapes
         from ..analysis.result_model import result_modes

@@ -22,6 +22,7 @@ from ..analysis.result_model import result_modes, result_solid, result_system  #
 from .plots import Q8_OUTLINE  # noqa: E402
 from ..io.model import read_record, read_result  # noqa: E402
 from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
+from ..io.results import require, require_states  # noqa: E402
 from ..granular.loads import load_history  # noqa: E402
 from .encoding import write_movie  # noqa: E402
 
@@ -42,6 +43,7 @@ def default_magnification(ds) -> float:
     level = load_history(loads[0].kind, loads[0].params, loads[0].times, loads[0].values).shock_level if loads else None
     if level in MAGNIFICATION:
         return MAGNIFICATION[level]
+    require_states(ds, "the movie's magnification")
     disp = np.hypot(ds["x"].values - ds["x"].values[0], ds["y"].values - ds["y"].values[0]).max()
     return float(0.003 / disp) if disp > 0 else 1.0
 
@@ -159,6 +161,9 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
     xlim, ylim = _limits(ds, system, model)
     has_solid = model.kind in ("plate", "beam") and "solid_time" in ds
     modes = result_modes(ds) if has_solid and "solid_x" not in ds else None
+    require_states(ds, "a movie")
+    if model.kind in ("plate", "beam"):
+        require(ds, ["solid_time"], "a movie of the solid")
     X, Yp = ds["x"].values[idx], ds["y"].values[idx]
     plan = FramePlan(field, times, np.asarray(system.radius, float), np.stack([X, Yp], axis=-1), tuple(xlim), tuple(ylim),
                      solid_kind=model.kind if has_solid else "rigid", model=model,

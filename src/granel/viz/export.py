@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..guard.writing import fsync_path, staging_folder
+from ..io.results import require, require_states
 
 FORMATS = ("vtk", "xdmf", "csv", "extxyz")
 EXTXYZ_PROPERTIES = "species:S:1:pos:R:3:radius:R:1:velo:R:3:omega:R:1"
@@ -64,12 +65,24 @@ def _vec3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.column_stack([a, b, np.zeros_like(a)])
 
 
+def check_exportable(ds, formats, name="result") -> None:
+    """ResultFileError (exit 2), before anything is written, when a format needs what the result
+    does not store (simulation.outputs): every granule's state for VTK, XDMF and extended XYZ, the
+    solid's state for VTK and XDMF of a plate or beam. CSV takes what is there."""
+    formats = set(formats)
+    if formats & {"vtk", "xdmf", "extxyz"}:
+        require_states(ds, f"{name}: the {'/'.join(f for f in FORMATS if f in formats and f != 'csv')} export")
+    if formats & {"vtk", "xdmf"} and ds.sizes.get("solid_node", 0):
+        require(ds, ["solid_time"], f"{name}: the export of the solid")
+
+
 def has_solid(ds, model) -> bool:
     return model.kind in ("plate", "beam") and "solid_time" in ds and model.nodes is not None
 
 
 def granule_frame(ds, system, k: int) -> dict[str, np.ndarray]:
     """The granules at output k: centres (n, 3), and the point data."""
+    require_states(ds, "the export of the granules")
     x, y = ds["x"].values[k].astype(float), ds["y"].values[k].astype(float)
     vx, vy = ds["v_x"].values[k].astype(float), ds["v_y"].values[k].astype(float)
     om = ds["omega"].values[k].astype(float)
@@ -143,6 +156,7 @@ def solid_frames(ds, model, elastic: tuple[float, float]
     from ..analysis.density import solid_energy_density
     from .animate import solid_states
 
+    require(ds, ["solid_time"], "the export of the solid")
     ts = ds["solid_time"].values.astype(float)
     for a in range(0, len(ts), SOLID_CHUNK):
         Q, V = solid_states(ds, ts[a:a + SOLID_CHUNK])
@@ -294,23 +308,25 @@ def write_extxyz(ds, system, stage: Path, tick: Callable[[], None]) -> list[str]
     return ["granules.extxyz"]
 
 
-def _long_csv(path: Path, ds, key: str, names: list[str], columns: list[str]) -> None:
-    """A long-format table: one row per output and `key` entry (granule, wall, contact)."""
+def _long_csv(path: Path, ds, key: str, names: list[str], columns: list[str]) -> bool:
+    """A long-format table: one row per output and `key` entry (granule, wall, contact) the result
+    stores (a reduced result's traced granules only); False, and no file, when it stores none."""
     import csv
 
+    if not all(n in ds for n in names):
+        return False
     times = ds["time"].values.astype(float)
     labels = [str(s) for s in ds[key].values] if key in ds.coords else []
-    present = [n in ds for n in names]
+    data = [ds[n].values.astype(float) for n in names]
+    stored = [i for i in range(len(labels)) if not (len(times) and np.isnan(data[0][0, i]))]
     with open(path, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
         out.writerow(["time", key, *columns])
-        if not labels or not all(present):
-            return
-        data = [ds[n].values.astype(float) for n in names]
         for k, t in enumerate(times):
             ts = _fmt(t)
-            for i, lab in enumerate(labels):
-                out.writerow([ts, lab, *(_fmt(d[k, i]) for d in data)])
+            for i in stored:
+                out.writerow([ts, labels[i], *(_fmt(d[k, i]) for d in data)])
+    return True
 
 
 def ledger_names(ds) -> list[str]:
@@ -322,13 +338,14 @@ def write_csv(ds, stage: Path, tick: Callable[[], None]) -> list[str]:
     import csv
 
     cols = ["x", "y", "v_x", "v_y", "omega"]
-    _long_csv(stage / "traces.csv", ds, "granule", cols, cols)
-    tick()
-    _long_csv(stage / "walls.csv", ds, "wall", ["wall_force_normal", "wall_force_tangential"], ["normal", "tangential"])
-    tick()
-    _long_csv(stage / "contacts.csv", ds, "contact", ["contact_force_normal", "contact_force_tangential"],
-              ["normal", "tangential"])
-    tick()
+    written = []
+    for name, key, names, columns in (
+            ("traces.csv", "granule", cols, cols),
+            ("walls.csv", "wall", ["wall_force_normal", "wall_force_tangential"], ["normal", "tangential"]),
+            ("contacts.csv", "contact", ["contact_force_normal", "contact_force_tangential"], ["normal", "tangential"])):
+        if _long_csv(stage / name, ds, key, names, columns):  # what a reduced result left out has no table
+            written.append(name)
+        tick()
     names = ledger_names(ds)
     data = [ds[n].values.astype(float) for n in names]
     with open(stage / "energies.csv", "w", newline="", encoding="utf-8") as f:
@@ -337,7 +354,7 @@ def write_csv(ds, stage: Path, tick: Callable[[], None]) -> list[str]:
         for k, t in enumerate(ds["time"].values.astype(float)):
             out.writerow([_fmt(t), *(_fmt(d[k]) for d in data)])
     tick()
-    return ["traces.csv", "walls.csv", "contacts.csv", "energies.csv"]
+    return [*written, "energies.csv"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,6 +369,7 @@ def export_result(ds, out: str | Path, formats: Iterable[str] = FORMATS,
     from ..analysis.result_model import result_solid, result_system
 
     formats = [f for f in FORMATS if f in set(formats)]
+    check_exportable(ds, formats, name)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     system, model = result_system(ds, name), result_solid(ds, name)

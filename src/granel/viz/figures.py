@@ -17,6 +17,7 @@ from ..analysis.modal import accumulated_modal_energy, modal_coordinates, modal_
 from ..analysis.reciprocity import directed_velocity, excitation_of  # noqa: E402
 from ..analysis.result_model import result_solid, result_system  # noqa: E402
 from ..io.model import read_record  # noqa: E402
+from ..io.results import require, require_states  # noqa: E402
 
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
 
@@ -176,6 +177,7 @@ def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=No
     e, _ = granule_energies_at(ds, k, su)
     wg = granule_energy_density(system, e, system.radius) / w0
     norm = norm or LogNorm(1e-6, 1.0)
+    require_states(ds, "the energy density figure")
     patches = [Circle((x, y), r) for x, y, r in zip(ds["x"].values[k], ds["y"].values[k], system.radius)]
     pc = PatchCollection(patches, cmap=cmap, norm=norm, edgecolor="0.5", linewidth=0.3)
     pc.set_array(np.clip(wg, norm.vmin, None))
@@ -345,6 +347,7 @@ def fig11_eigenvalues(ds, out, tmax=2e-4, source="", left=("LSGM:10", "LSGM:11",
     for all contacts. `source` says where the run came from (printed under the title)."""
     if ds.attrs.get("solver_name") != "paper":
         raise ValueError("Fig. 11 needs a run of the paper's algorithm (simulation.solver = \"paper\")")
+    require(ds, ["step_time", "step_lambda"], "Fig. 11")
     t = ds["step_time"].values
     lam = ds["step_lambda"].values
     names = list(ds["contact"].values)

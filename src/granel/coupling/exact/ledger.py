@@ -53,7 +53,7 @@ def trial_ledger(state, solid, cache, slot, model, work):
     eg = granular_energy(y, model, work.nodes.u[nn - 1].reshape(m2 // 2, 2))
     acc = ledger_offset(model.granules.radius.shape[0])
     visc, fric, work_in = y[acc + ACC_VISC], y[acc + ACC_FRIC], y[acc + ACC_WORK]
-    work.trial[0].roundoff = LEDGER_ROUNDOFF * (es + eg + abs(visc + fric) + abs(work_in))
+    work.trial[0].roundoff = LEDGER_ROUNDOFF * (es + abs(eg) + abs(visc + fric) + abs(work_in))
     return energy_ledger(es, eg, visc, fric, work_in)
 
 
@@ -63,7 +63,8 @@ def contact_roundoff(y, dy, model, su, t):
     difference of lengths of the size of the radii, rounded to LEDGER_ROUNDOFF of that, which its
     force A delta^(3/2) turns into energy; and rounding a granule's position changes its
     contacts' energy by the net contact force on it (m a minus the loads; dy holds a) times
-    that. Under a static preload these are far above the energies' own rounding."""
+    that (the loads and weights too). Under a static preload these are far above the energies' own
+    rounding."""
     gr = model.granules
     radius = gr.radius
     n = radius.shape[0]
@@ -86,6 +87,8 @@ def contact_roundoff(y, dy, model, su, t):
     for e in range(loads.g.shape[0]):
         i = loads.g[e]
         total += abs(load_value(loads, e, t)) * max(abs(y[2 * i]), abs(y[2 * i + 1]))
+    for i in range(n):  # the weights, like the loads
+        total += math.hypot(gr.weight[i, 0], gr.weight[i, 1]) * max(abs(y[2 * i]), abs(y[2 * i + 1]))
     return LEDGER_ROUNDOFF * total
 
 
