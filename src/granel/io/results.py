@@ -366,14 +366,13 @@ def require_states(ds, what: str, granules=None) -> None:
     of the granules `granules` (indices; None: every granule), naming the first missing one and
     the setting (simulation.outputs.granules). A result read by `with_every_granule` holds NaN
     for the granules it did not trace."""
-    if "x" not in ds.variables:
+    if "v_x" not in ds.variables:  # the six are stored together (`check_result_schema`)
         raise ResultFileError(f"{what} needs the granules' states (x, y, v_x, ...): this result was run with "
                               "simulation.outputs.granules = \"none\"", 2)
-    dims = ds["x"].dims
-    if "traced" in dims:
+    if "traced" in ds["v_x"].dims:
         raise ResultFileError(f"{what} needs the granules' states along `granule`: read the result with "
                               "io.results.with_every_granule", 2)
-    stored = np.isfinite(np.asarray(ds["x"].values[0], float))
+    stored = np.isfinite(np.asarray(ds["v_x"].values[0], float))
     wanted = np.arange(len(stored)) if granules is None else np.atleast_1d(np.asarray(granules, int))
     missing = [int(g) for g in wanted if not stored[g]]
     if missing:

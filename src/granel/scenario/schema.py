@@ -75,8 +75,7 @@ class OutputsSpec(_Strict):
     always there; each group below can be left out, and the file is compressed."""
 
     granules: Union[Literal["all", "none"], list[str]] = Field(
-        "all", description="the granules whose state (x, y, theta, v_x, v_y, omega) is stored at every output: all, none, "
-        "or a list of labels (e.g. [\"A:1\", \"A:30\"]), stored along a `traced` dimension")
+        "all", description="the granules whose state is stored at each output: all, none, or a list of labels (traces)")
     contacts: bool = Field(True, description="the forces on the solid at each contact and the largest friction "
                            "eigenvalue between outputs (contact_force_*, lambda_max)")
     walls: bool = Field(True, description="the forces on each rigid wall (wall_force_*)")
