@@ -103,6 +103,10 @@ OVERLAP_ROUNDINGS = 2.0
 # that barely touch, can carry a granule through its neighbours to where their contacts push it on,
 # which lowers the energy without end
 STEP_LIMIT = 0.1
+# halvings of a Newton step tried before the shift grows (measured: a 9,950-granule packing under
+# gravity took 25 factorisations without them; a step that fails as a whole usually succeeds at
+# half or a quarter of its length, where a contact it would open or close is not yet crossed)
+BACKTRACKS = 3
 # a contact whose gap is below this share of its radius is touching: the predictor gives it the
 # secant stiffness of the load (a packing written to a few digits touches only to those digits)
 TOUCHING = 1e-6
@@ -355,15 +359,21 @@ def equilibrium(system, model, compliance=None, max_iterations: int = 200) -> Eq
         except RuntimeError:  # singular even with the shift
             lam = max(100.0 * lam, 1e-6 * k_ref)
             continue
-        if np.max(np.hypot(*dx.T) / system.radius, initial=0.0) > STEP_LIMIT:
-            lam *= 10.0  # beyond the trust region: a granule would jump through its neighbours
-            continue
-        trial = residual(x + dx, w + dw)
-        if trial.improves(now):
-            x, w, now = x + dx, w + dw, trial
-            lam = max(lam / 100.0, 1e-12 * k_ref)
+        # within the trust region (no granule through its neighbours), then halved while the
+        # energy does not fall: residuals only, each far cheaper than a new factorisation
+        longest = np.max(np.hypot(*dx.T) / system.radius, initial=0.0)
+        alpha = min(1.0, STEP_LIMIT / longest) if longest > 0 else 1.0
+        for _ in range(BACKTRACKS + 1):
+            trial = residual(x + alpha * dx, w + alpha * dw)
+            if trial.improves(now):
+                break
+            alpha *= 0.5
         else:
-            lam *= 10.0
+            lam *= 10.0  # no fraction of this step lowers anything: shift further
+            continue
+        x, w, now = x + alpha * dx, w + alpha * dw, trial
+        if alpha == 1.0:
+            lam = max(lam / 100.0, 1e-12 * k_ref)
     b = now.balance
     pairs, walls = b.pairs, b.walls
     return Equilibrium(pos=x, u=displacement(w), solid_forces=b.Fs, pair_forces=pairs[1], pair_overlaps=pairs[2], pairs=pairs[0],
