@@ -359,16 +359,8 @@ def equilibrium(system, model, compliance=None, max_iterations: int = 200) -> Eq
         except RuntimeError:  # singular even with the shift
             lam = max(100.0 * lam, 1e-6 * k_ref)
             continue
-        # within the trust region (no granule through its neighbours), then halved while the
-        # energy does not fall: residuals only, each far cheaper than a new factorisation
-        longest = np.max(np.hypot(*dx.T) / system.radius, initial=0.0)
-        alpha = min(1.0, STEP_LIMIT / longest) if longest > 0 else 1.0
-        for _ in range(BACKTRACKS + 1):
-            trial = residual(x + alpha * dx, w + alpha * dw)
-            if trial.improves(now):
-                break
-            alpha *= 0.5
-        else:
+        alpha, trial = _line_search(residual, now, x, w, dx, dw, system.radius)
+        if trial is None:
             lam *= 10.0  # no fraction of this step lowers anything: shift further
             continue
         x, w, now = x + alpha * dx, w + alpha * dw, trial
@@ -380,6 +372,21 @@ def equilibrium(system, model, compliance=None, max_iterations: int = 200) -> Eq
                        wall_forces=walls[1], wall_overlaps=walls[2], walls=walls[0], iterations=it,
                        residual=float(np.abs(b.F).max(initial=0.0)),
                        tolerance=float(b.roundoff.max(initial=0.0)))
+
+
+def _line_search(residual, now, x, w, dx, dw, radius):
+    """(alpha, the trial there) of the first step alpha (dx, dw) that lowers the energy
+    (`_Trial.improves`): alpha shortened to the trust region (no granule moves more than
+    STEP_LIMIT of its radius, so none passes through its neighbours), then halved up to BACKTRACKS
+    times, residuals only (each far cheaper than a factorisation); (0, None) when none does."""
+    longest = np.max(np.hypot(*dx.T) / radius, initial=0.0)
+    alpha = min(1.0, STEP_LIMIT / longest) if longest > 0 else 1.0
+    for _ in range(BACKTRACKS + 1):
+        trial = residual(x + alpha * dx, w + alpha * dw)
+        if trial.improves(now):
+            return alpha, trial
+        alpha *= 0.5
+    return 0.0, None
 
 
 def _free_motion_message(system, granules, motion) -> str:
