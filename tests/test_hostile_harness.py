@@ -1733,12 +1733,19 @@ def _cpu_seconds(pid: int) -> float:
 LONG_RUN = ["run", "scen.toml", "--duration", "1000ms", "--set", "simulation.output_every=100us", "-o", "long.nc"]
 
 
+def _sigint_as_at_a_terminal():
+    """In the child: SIGINT at its default, as for a command typed at a terminal. A suite started
+    in the background by a shell without job control (`make test &` in a script, nohup) hands its
+    children SIGINT ignored, and granel keeps an ignored SIGINT ignored (guard.signals)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc to see the run has started")
 def test_ctrl_c_during_a_run(assets):
     """SIGINT once the run computes: exit 130, one error line, no result, no temporary."""
     box = new_box(assets)
     try:
-        o = invoke_subprocess(box, LONG_RUN, ["long.nc"],
+        o = invoke_subprocess(box, LONG_RUN, ["long.nc"], preexec_fn=_sigint_as_at_a_terminal,
                               signal_when=(lambda proc: _cpu_seconds(proc.pid) > 2.5, signal.SIGINT))
         assert o.code == 130 and "interrupted" in o.error, f"expected exit 130\n{o}"
         assert not (box / "long.nc").exists()
@@ -1755,7 +1762,7 @@ def test_ctrl_c_keeps_the_checkpoint_and_resume_finishes(assets):
     try:
         options = ["--duration", "20ms", "--set", "simulation.output_every=10us", "--checkpoint-every", "2ms"]
         args = ["run", "scen.toml", *options, "-o", "long.nc"]
-        o = invoke_subprocess(box, args, ["long.nc", "long.ckpt"],
+        o = invoke_subprocess(box, args, ["long.nc", "long.ckpt"], preexec_fn=_sigint_as_at_a_terminal,
                               signal_when=(lambda proc: (box / "long.ckpt").exists(), signal.SIGINT))
         assert o.code in (0, 130), o
         if o.code == 130:
