@@ -80,14 +80,15 @@ def test_blitted_frame_equals_full_redraw(plate_run, field):
 def test_deformation_outlines_follow_the_plate(plate_run):
     from granel.analysis.result_model import result_solid
     from granel.viz.figures import solid_state_at
-    from granel.viz.plots import _element_outlines
-
     ds, _ = plate_run
     plan = A.plan_frames(ds, "deformation", magnification=500.0, max_frames=5)
     model = result_solid(ds)
     q, _, _ = solid_state_at(ds, float(plan.times[-1]))
-    ref = np.array(_element_outlines(model, model.full_displacement(q), 500.0))
-    np.testing.assert_allclose(plan.plate_verts[-1], ref, rtol=0, atol=1e-12)
+    # each Q8 element's outline: corner, mid-side, corner, ... (its nodes 0, 4, 1, 5, 2, 6, 3, 7)
+    moved = model.nodes + 500.0 * model.full_displacement(q)
+    ref = moved[np.asarray(model.elements)[:, [0, 4, 1, 5, 2, 6, 3, 7]]]
+    np.testing.assert_allclose(plan.solid_polygons[-1], ref, rtol=0, atol=1e-12)
+    assert plan.solid_line is None
 
 
 def test_render_movies_parallel_equals_serial(plate_run, tmp_path):

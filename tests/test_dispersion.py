@@ -1,4 +1,4 @@
-"""The analytic dispersion branches (`analysis.dispersion`) against closed forms from the
+"""The analytic dispersion branches (`solid.dispersion`) against closed forms from the
 literature, none derived here from the root finder's equations:
 
 - S0 at low k: the plate speed of a layer with bulk speeds c_p, c_s, 2 c_s sqrt(1 - c_s^2/c_p^2)
@@ -24,7 +24,7 @@ import math
 import numpy as np
 import pytest
 
-from granel.analysis.dispersion import (
+from granel.solid.dispersion import (
     ROOT_RTOL,
     euler_bernoulli_frequency,
     lamb_branches,

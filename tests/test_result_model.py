@@ -102,7 +102,7 @@ def test_a_new_result_is_read_without_the_scenario_builder(results, tmp_path, mo
         monkeypatch.setattr(module, name, _refuse)
     ds = load_result(path)
     plan = A.plan_frames(ds, "energy-density", max_frames=4)
-    w = plan.plate_w if kind == "plate" else plan.beam_w
+    w = plan.solid_w
     assert np.all(np.isfinite(w)) and w.max() > 1e-3  # the shock has reached the solid
     assert plan.granule_w.max() > 0.1
     deform = A.plan_frames(ds, "deformation", magnification=200.0, max_frames=4)
@@ -138,7 +138,7 @@ def test_an_old_result_gets_its_record_once_and_renders_the_same(results, tmp_pa
     for name in data_a:
         np.testing.assert_array_equal(data_a[name][1], data_b[name][1])
     a, b = (A.plan_frames(d, "energy-density", max_frames=4) for d in (migrated, fresh))
-    np.testing.assert_array_equal(a.plate_w, b.plate_w)
+    np.testing.assert_array_equal(a.solid_w, b.solid_w)
     np.testing.assert_array_equal(a.granule_w, b.granule_w)
     assert result_modes(migrated) is result_modes(fresh)  # one solid: one set of modes
     export_result(migrated, tmp_path / "old-export", ["csv"])

@@ -1,7 +1,7 @@
 """Issue 31, item 2: the ridges of the frequency-wavenumber map of an impulsively excited solid (a
 single granule pressed against it by a short half-sine, scenarios/wavefield/impact.toml) lie on
 the analytic dispersion branches,
-computed without the finite-element model (`analysis.dispersion`, validated in test_dispersion):
+computed without the finite-element model (`solid.dispersion`, validated in test_dispersion):
 the plate's Rayleigh-Lamb branches of a layer of its width with the plane-stress speeds, the
 beam's Euler-Bernoulli branch; within 1 % in frequency.
 
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from granel.analysis.dispersion import euler_bernoulli_frequency, lamb_frequencies, plane_stress_speeds
+from granel.solid.dispersion import euler_bernoulli_frequency, lamb_frequencies, plane_stress_speeds
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "wavefield" / "impact.toml"
 E, NU, RHO = 200e9, 0.3, 7850.0  # the scenario's steel and plate, read back below

@@ -197,7 +197,7 @@ def modes(
     from .studies.natural_modes import mode_rows, scenario_modes
 
     sc = S.load(scenario, _overrides(solid, sets=set_))
-    if plot is not None and sc.solid is not None and sc.solid.kind not in ("rigid", "none"):
+    if plot is not None and S.elastic_solid(sc) is not None:
         picture_file(plot, "--plot", S.scenario_inputs(scenario, sc))
     res = scenario_modes(sc, count, plot)
     if json_out:

@@ -12,7 +12,7 @@ from .modal import (  # noqa: F401
 )
 from .reciprocity import arrival_time, nonreciprocity_index, reciprocity_metrics  # noqa: F401
 from .signals import amplitude_spectrum, dominant_frequency, peak_time, peak_width, zero_crossing_frequency  # noqa: F401
-from .density import beam_energy_density_grid, granule_energy_density, solid_energy_density  # noqa: F401
+from .density import granule_energy_density, solid_energy_density  # noqa: F401
 from .narrowband import (  # noqa: F401
     Drive,
     drive_of,

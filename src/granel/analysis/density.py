@@ -31,21 +31,7 @@ def granule_energy_density(system, y_state_energies, radius) -> np.ndarray:
 
 def solid_energy_density(model, q, v) -> np.ndarray:
     """w of eq. (14) per element of the solid: (kinetic + strain energy) / volume."""
-    kin, pot = model.element_energies(q, v)
-    return (np.asarray(kin) + np.asarray(pot)) / model.element_volume
-
-
-def beam_energy_density_grid(model, q, v, nx: int = 21) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The paper's interpolation of beam element energies across the width (Sec. IV): kinetic
-    energy uniform across the width, strain energy parabolic (zero on the neutral axis), each
-    integrating back to the element's energy. Returns (x (nx,), y edges (ne+1,), w (ne, nx))."""
-    kin, pot = model.element_energies(q, v)
-    vol = model.element_volume
-    depth = model.info["width"]
-    s = np.linspace(-0.5, 0.5, nx)
-    shape = 12.0 * s**2  # the mean of 12 s^2 over s in [-1/2, 1/2] is 1
-    w = (kin / vol)[:, None] + (pot / vol)[:, None] * shape[None, :]
-    return model.nodes[0, 0] + s * depth, model.nodes[:, 1], w
+    return model.element_energy_density(q, v)
 
 
 def granule_states(ds, idx: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ import scipy.linalg
 
 from ..granular.loads import Harmonic, load_history
 from ..io.model import read_record
+from ..solid.kinds import is_elastic
 from .chain import ChainError, LinearChain, band_edges, chain_matrices, linear_chain
 from .signals import damped_modes
 
@@ -331,7 +332,7 @@ def cutoff_frequency(ds, system, min_periods: float = 10.0, max_strain: float = 
                 f"a second oscillation of {leak:.2g} of the mode's amplitude beside it (the motion is not the linearised "
                 "chain's modes)")
         kind = str(ds.attrs.get("solid_kind", "rigid"))
-        if kind != "rigid" and any(e.on_solid for e in chain.ends):
+        if is_elastic(kind) and any(e.on_solid for e in chain.ends):
             longer = (f"the chain presses on the {kind}, whose motion at the contact couples the chain to the solid's "
                       f"modes: end the chain on a wall or on a rigid solid (solid.kind = \"rigid\"); or {longer}")
         raise CutoffError(f"the fit of the top mode's coordinate finds {what}: {longer}")
@@ -381,7 +382,7 @@ def _end_shift(ds, chain: LinearChain, top_hz: float) -> float:
     """For ends held by an elastic solid: the largest |the linearised top mode with that end free
     / `top_hz` (with it held) - 1|, a scale of how far the solid's own motion, neglected, could
     move the cut-off; 0 when no end presses on an elastic solid."""
-    if str(ds.attrs.get("solid_kind", "rigid")) == "rigid":
+    if not is_elastic(str(ds.attrs.get("solid_kind", "rigid"))):
         return 0.0
     shift = 0.0
     for k, end in enumerate(chain.ends):

@@ -15,6 +15,7 @@ from ..granular.system import ContactLaw, Excitation, GranularSystem, SolidConta
 from ..io.model import read_record
 from ..io.results import ResultFileError
 from ..solid.base import SolidModel, rigid_solid
+from ..solid.kinds import KINDS as SOLID_KINDS
 from ..solid.mode_cache import all_modes
 from ..solid.recipe import SolidRecipe, build_solid_model
 
@@ -42,7 +43,10 @@ def result_solid(ds, name="result") -> SolidModel:
     its contacts). ResultFileError (code 2) naming `name` if it cannot be built or differs from the
     record (its DOFs, its contacts' DOFs)."""
     rec = read_record(ds, name)
-    if rec.solid_kind == "rigid":
+    if rec.solid_kind not in SOLID_KINDS:
+        raise ResultFileError(f"{name}: damaged result (its solid's kind {rec.solid_kind!r} is none of "
+                              f"{', '.join(SOLID_KINDS)})", 2)
+    if not SOLID_KINDS[rec.solid_kind].elastic:
         return rigid_solid([(c.name, c.position, c.normal) for c in rec.contacts])
     if not rec.solid_recipe:
         raise ResultFileError(f"{name}: its {rec.solid_kind} was not built from a recipe (solid.recipe): its model "

@@ -2,20 +2,19 @@
 Dataset and its solid model. The node lines and the transform that fits the ends, the kinetic
 energy E(k, t) of each harmonic (and the modes' energy of eq. 15 shared over the harmonics), its
 moments and their growth law, band-filtered fields, and the frequency-wavenumber map with its
-ridges and the analytic branches (`analysis.dispersion`). docs/wavefield.md ("Method") states the
+ridges and the analytic branches (`solid.dispersion`). docs/wavefield.md ("Method") states the
 definitions with their equations."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..io.results import ResultFileError
+from ..solid.kinds import kind_of
 from .modal import modal_energies
-from .dispersion import LambBranches, euler_bernoulli_frequency, lamb_branches, plane_stress_speeds
 
 ENDS = {(True, True): "clamped-clamped", (False, False): "free-free", (True, False): "clamped-free",
         (False, True): "free-clamped"}
@@ -131,64 +130,15 @@ class NodeLines:
         return len(self.x), len(self.components), len(self.basis.y)
 
 
-def _quadratic_weights(y: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(indices (n, 3), weights (n, 3)) of the quadratic Lagrange interpolation at points y
-    through the node triples (vertex, mid-side, vertex) of a line whose sorted node heights are
-    `nodes` (2 m + 1 of them)."""
-    sides = (len(nodes) - 1) // 2
-    m = np.clip(np.searchsorted(nodes[2::2], y, side="left"), 0, sides - 1)
-    idx = np.stack([2 * m, 2 * m + 1, 2 * m + 2], axis=1)
-    p = nodes[idx]
-    w = np.empty_like(p)
-    for a in range(3):
-        b, c = (a + 1) % 3, (a + 2) % 3
-        w[:, a] = (y - p[:, b]) * (y - p[:, c]) / ((p[:, a] - p[:, b]) * (p[:, a] - p[:, c]))
-    return idx, w
-
-
 def node_lines(model, samples: int | None = None) -> NodeLines:
-    """The node lines of a plate or beam model (built from its recipe: `model.recipe`). A
-    plate's lines are its vertex columns, sampled at `samples` points (default: two per the
-    longest node gap along the length, so that the coarsest elements' nodes are resolved); a
-    beam's line is its nodes. ValueError for another kind of solid."""
+    """The node lines of a solid built from its recipe (`model.recipe`), as its kind samples them
+    (`SolidKind.wave_lines`: a plate's vertex columns, a beam's nodes) on the basis of its ends.
+    ValueError for a kind without a wavefield."""
+    lines = kind_of(model).wave_lines(model, samples)
     r = model.recipe
-    if model.kind not in ("plate", "beam") or r is None or model.nodes is None:
-        raise ValueError(f"a {model.kind} solid has no wavefield (a plate or a beam built from its recipe has)")
-    clamped = tuple(bool(c) for c in r.clamped)
-    nodes = np.asarray(model.nodes, float)
-    if model.kind == "beam":
-        ne = len(nodes) - 1
-        count = {(True, True): ne - 1, (False, False): ne + 1}.get(clamped, ne)
-        basis = spatial_basis(r.y0, r.length, count, clamped)
-        at = np.rint((basis.y - r.y0) / (r.length / ne)).astype(int)
-        S = sp.csr_matrix((np.ones(count), (np.arange(count), 2 * at)), shape=(count, model.T.shape[0]))
-        return NodeLines("beam", np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",),
-                         basis, (S @ model.T).tocsr(), float(r.length / ne))
-    ny = int(model.info["ny"])
-    tol = 1e-9 * r.width
-    xs = np.unique(np.round(nodes[:, 0] / tol) * tol)
-    columns = [np.flatnonzero(np.abs(nodes[:, 0] - x) < 2 * tol) for x in xs]
-    columns = [c[np.argsort(nodes[c, 1])] for c in columns if len(c) == 2 * ny + 1]
-    x = np.array([nodes[c[0], 0] for c in columns])
-    gaps = max(float(np.diff(nodes[c, 1]).max()) for c in columns)
-    if samples is None:
-        samples = int(math.ceil(2 * r.length / gaps))
-    basis = spatial_basis(r.y0, r.length, samples, clamped)
-    rows, cols, vals = [], [], []
-    n = len(basis.y)
-    for i, c in enumerate(columns):
-        idx, w = _quadratic_weights(basis.y, nodes[c, 1])
-        for comp in (0, 1):
-            dofs = np.asarray(model.node_dofs[comp])[c][idx]
-            rows.append(np.repeat((2 * i + comp) * n + np.arange(n), 3))
-            cols.append(dofs.ravel())
-            vals.append(w.ravel())
-    S = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(2 * len(columns) * n, model.T.shape[0]))
-    share = np.zeros(len(x))  # the trapezoid rule across the width
-    share[:-1] += np.diff(x) / 2
-    share[1:] += np.diff(x) / 2
-    return NodeLines("plate", x, r.rho * r.thickness * share, ("x", "y"), basis, (S @ model.T).tocsr(), 2 * gaps)
+    basis = spatial_basis(r.y0, r.length, lines.count, tuple(bool(c) for c in r.clamped))
+    return NodeLines(model.kind, lines.x, lines.mass, lines.components, basis, (lines.sampler(basis.y) @ model.T).tocsr(),
+                     lines.element)
 
 
 def resolved_wavenumber(lines: NodeLines, error: float = FE_ERROR) -> float:
@@ -443,32 +393,22 @@ def map_ridges(fk: FrequencyWavenumberMap, floor: float = 1e-3, k_max: float = n
 
 @dataclass(frozen=True)
 class SolidBranches:
-    """The analytic dispersion of a solid over wavenumbers k [rad/m]: a plate's Rayleigh-Lamb
-    branches (`lamb`), or a beam's Euler-Bernoulli branch (`flexural`, Hz)."""
+    """The analytic dispersion of a solid over wavenumbers k [rad/m]: each branch's frequencies
+    [Hz] by name (a plate's Rayleigh-Lamb S0, S1, ..., A0, ...; a beam's Euler-Bernoulli EB)."""
 
     k: np.ndarray
-    lamb: LambBranches | None = None
-    flexural: np.ndarray | None = None
+    named: dict
 
     def curves(self) -> dict[str, np.ndarray]:
-        """Each branch by name (S0, S1, ..., A0, A1, ...; EB), frequencies [Hz] over k."""
-        if self.lamb is None:
-            return {"EB": self.flexural}
-        out = {}
-        for family, rows in (("S", self.lamb.symmetric), ("A", self.lamb.antisymmetric)):
-            out.update({f"{family}{n}": rows[n] for n in range(len(rows))})
-        return out
+        """Each branch by name, frequencies [Hz] over k."""
+        return dict(self.named)
 
 
 def solid_branches(model, k, count: int = 3) -> SolidBranches:
-    """The branches of a plate or beam: the plate's strip of width h with the plane-stress speeds
-    of its recipe's E, nu, rho (`dispersion.plane_stress_speeds`, `lamb_branches`), the beam's EI
-    and rho A as `solid.beam.build_beam` made them (`euler_bernoulli_frequency`)."""
-    r = model.recipe
+    """The analytic branches of a solid as its kind gives them (`SolidKind.branches`, from
+    `solid.dispersion`: independent of its finite-element model)."""
     k = np.asarray(k, float)
-    if model.kind == "beam":
-        return SolidBranches(k, flexural=euler_bernoulli_frequency(k, model.info["EI"], model.info["rhoA"]))
-    return SolidBranches(k, lamb=lamb_branches(k, r.width, plane_stress_speeds(r.E, r.nu, r.rho), count))
+    return SolidBranches(k, kind_of(model).branches(model, k, count))
 
 
 # --------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from .build import (  # noqa: F401
     build_solid,
     built_models,
     check_scenario,
+    elastic_solid,
 )
 from .files import (  # noqa: F401
     _format_validation_error,

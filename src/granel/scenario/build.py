@@ -22,17 +22,18 @@ from ..granular.kernels import FRICTION_MARGIN, RK4_REAL_LIMIT, SUBSTEP_RATE_STE
 from ..granular.materials import damping_coefficient, pair_coefficients, wall_coefficients
 from ..problem import Problem
 from ..solid.base import SolidModel
-from ..solid.plate import PlateMesh
+from ..solid.kinds import kind_of
 from ..solid.recipe import RecipeContact, SolidRecipe, build_solid_model
 from .files import to_toml
 from .tables import read_granules_table
-from .schema import ExcitationSpec, Scenario, ScenarioError
+from .schema import ExcitationSpec, Scenario, ScenarioError, present_solid
 
 
 
-def present_solid(sc: Scenario):
-    """The scenario's solid, or None for `solid.kind = "none"` (granules, walls and loads only)."""
-    return None if sc.solid is None or sc.solid.kind == "none" else sc.solid
+def elastic_solid(sc: Scenario):
+    """The scenario's [solid] table if its kind moves (`SolidKind.elastic`), else None."""
+    s = present_solid(sc)
+    return s if s is not None and kind_of(s.kind).elastic else None
 
 
 def build_media(sc: Scenario, base: Path | None = None):
@@ -315,18 +316,13 @@ def solid_recipe(sc: Scenario, system) -> SolidRecipe:
     """What the scenario's solid is built from (`solid.recipe`): a rigid solid for none; only the
     fields its kind uses (a design's probe tells a field that matters by them)."""
     s = present_solid(sc)
-    kind = "rigid" if s is None else s.kind
-    layer = 0.0 if kind != "plate" else s.mesh.layer_fraction
-    contacts = tuple(RecipeContact(c.name, c.point, c.normal, layer * float(system.radius[c.granule]))
+    if s is None:
+        return SolidRecipe("rigid", tuple(RecipeContact(c.name, c.point, c.normal) for c in system.solid_contacts))
+    kind = kind_of(s.kind)
+    contacts = tuple(RecipeContact(c.name, c.point, c.normal, kind.layer(s) * float(system.radius[c.granule]))
                      for c in system.solid_contacts)
-    if kind == "rigid":
-        return SolidRecipe("rigid", contacts)
-    mat, mesh = sc.materials[s.material], s.mesh
-    box = dict(x0=s.x0, y0=s.y0, width=s.width, length=s.length, thickness=s.thickness, E=mat.E, rho=mat.rho)
-    if kind == "beam":  # Poisson's ratio unused: it keeps its default
-        return SolidRecipe("beam", contacts, **box, beam_elements=s.beam_elements, clamped=tuple(s.clamped))
-    return SolidRecipe("plate", contacts, **box, nu=mat.nu, clamped=tuple(s.clamped),
-                       mesh=PlateMesh(mesh.nx, mesh.growth, mesh.max_size, mesh.x_growth, mesh.rigid_layers))
+    material = sc.materials.get(s.material) if "material" in kind.fields else None
+    return SolidRecipe(kind.name, contacts, **kind.recipe_fields(s, material))
 
 
 def solver_settings(sc: Scenario) -> SolverSettings:

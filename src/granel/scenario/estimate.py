@@ -11,10 +11,10 @@ result file what `simulation.outputs` keeps, uncompressed (compression only make
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from .schema import Scenario
+from ..solid.kinds import kind_of
+from .schema import Scenario, present_solid
 
 BYTES_PER_GRANULE = 2048  # arrays, neighbour and wall candidates, labels
 BYTES_PER_GRANULE_OUTPUT = 2 * 6 * 8  # x, y, theta, v_x, v_y, omega in float64, twice
@@ -51,17 +51,10 @@ def granule_count(sc: Scenario) -> int:
 
 
 def solid_dofs(sc: Scenario) -> tuple[int, int]:
-    """(degrees of freedom, elements) of the scenario's solid, at least: a plate's rows of
-    elements are at least length / mesh.max_size (`solid.plate.plate_mesh`), Q8 nodes
-    (2 nx + 1)(2 ny + 1) - nx ny with two DOFs each; a beam's 2 (elements + 1)."""
-    s = sc.solid
-    if s is None or s.kind in ("rigid", "none"):
-        return 0, 0
-    if s.kind == "beam":
-        return 2 * (s.beam_elements + 1), s.beam_elements
-    nx = s.mesh.nx
-    ny = max(2, math.ceil(s.length / s.mesh.max_size))
-    return 2 * ((2 * nx + 1) * (2 * ny + 1) - nx * ny), nx * ny
+    """(degrees of freedom, elements) of the scenario's solid, at least, as its kind counts them
+    (`SolidKind.size`); (0, 0) without an elastic solid."""
+    s = present_solid(sc)
+    return (0, 0) if s is None else kind_of(s.kind).size(s)
 
 
 def run_needs(sc: Scenario, granules: int | None = None) -> Needs:

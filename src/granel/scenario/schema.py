@@ -494,3 +494,6 @@ class Scenario(_Strict):
         return self
 
 
+def present_solid(sc: Scenario):
+    """The scenario's [solid] table, or None for `solid.kind = "none"` (granules, walls and loads only)."""
+    return None if sc.solid is None or sc.solid.kind == "none" else sc.solid

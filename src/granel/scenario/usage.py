@@ -8,19 +8,15 @@ paper's plate thickness under `--solid rigid`): only what the user asks to chang
 from __future__ import annotations
 
 from ..granular.loads import KINDS
+from ..solid.kinds import KINDS as SOLID_KINDS
 from .schema import Scenario, ScenarioError
 
 # the load fields each kind of excitation reads (its class's `fields`), besides these
 LOAD_COMMON = {"granule", "kind", "direction"}
 LOAD_FIELDS = {kind: set(cls.fields) for kind, cls in KINDS.items()}
-# the solid fields each kind builds with (`build.build_solid`); the position and size also place
-# the media and the contact points of every kind but "none"
-SOLID_FIELDS = {
-    "plate": {"kind", "material", "x0", "y0", "width", "length", "thickness", "mesh", "clamped"},
-    "beam": {"kind", "material", "x0", "y0", "width", "length", "thickness", "beam_elements", "clamped"},
-    "rigid": {"kind", "x0", "y0", "width", "length"},
-    "none": {"kind"},
-}
+# the solid fields each kind builds with (`SolidKind.fields`); the position and size also place
+# the media and the contact points of every kind
+SOLID_FIELDS = {name: set(kind.fields) for name, kind in SOLID_KINDS.items()} | {"none": {"kind"}}
 # the fast method's exact integrator alone reads these (`coupling.exact.solver.ExactSolver`)
 EXACT_ONLY = {"integrator", "force_model", "adaptive", "rtol", "atol", "ledger_tol", "max_step", "mode_cutoff", "modes"}
 

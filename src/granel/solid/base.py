@@ -1,4 +1,5 @@
-"""The interface shared by every solid model (plate, beam, rigid).
+"""The interface shared by every solid model (plate, beam, rigid), and the protocol of a kind of
+solid (`SolidKind`: what every layer above asks of one, implemented once per kind).
 
 A solid is linear: M q'' + K q = B' F(t) in its reduced coordinates q (after clamping and the
 rigid-layer constraints), where F stacks the 2D forces applied at its contact points and
@@ -8,6 +9,7 @@ B maps q to the contact points' displacements u = B q (2 rows per contact: x the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -119,9 +121,119 @@ class SolidModel:
                 cols.append(c.dof_y)
         return sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * len(self.contacts), self.ndof))
 
+    def element_energy_density(self, q, v) -> np.ndarray:
+        """w of eq. (14) per element: (kinetic + strain energy) / volume [J/m^3]."""
+        kin, pot = self.element_energies(q, v)
+        return (np.asarray(kin) + np.asarray(pot)) / self.element_volume
+
     def energy(self, q, v) -> tuple[float, float]:
         """(kinetic 1/2 v'Mv, potential 1/2 q'Kq), eq. (11)."""
         return 0.5 * float(v @ (self.M @ v)), 0.5 * float(q @ (self.K @ q))
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A solid drawn in the granular plane [m]: its cells as polygons (P, k, 2), or its centre line
+    (n, 2) when it is drawn as a line."""
+
+    polygons: np.ndarray | None = None
+    line: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Patches:
+    """Cells of a solid (P, k, 2) [m] and a value on each (P,), e.g. the energy density (eq. 14)."""
+
+    polygons: np.ndarray
+    values: np.ndarray
+
+
+@dataclass(frozen=True)
+class LineSampling:
+    """How a solid's velocity is sampled along its length (the wavefield, docs/wavefield.md): lines
+    at x (nl,) [m] standing for the mass per length `mass` (nl,) [kg/m], the velocity `components`
+    sampled on each, `count` samples along the length, `element` the longest element along it [m],
+    and `sampler(y)`: the sparse map from the full nodal DOFs (T q) to the samples at heights y,
+    rows ordered (line, component, sample)."""
+
+    x: np.ndarray
+    mass: np.ndarray
+    components: tuple[str, ...]
+    count: int
+    element: float
+    sampler: Callable[[np.ndarray], sp.csr_matrix]
+
+
+class SolidKind:
+    """One kind of solid (plate, beam, rigid, ...): everything granel asks of a kind, so that no
+    layer above the solids tests a kind's name. `name` is the scenario's solid.kind; `elastic`
+    says whether it moves (has DOFs); `fields` are the [solid] fields it is built with.
+    `section` arguments are the scenario's [solid] table, `material` its material record."""
+
+    name = ""
+    elastic = True
+    fields: frozenset[str] = frozenset({"kind", "x0", "y0", "width", "length"})
+
+    def layer(self, section) -> float:
+        """The length of the rigid layer at a contact, as a fraction of the granule's radius."""
+        return 0.0
+
+    def recipe_fields(self, section, material) -> dict:
+        """The `solid.recipe.SolidRecipe` fields (beyond kind and contacts) of this kind."""
+        return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length)
+
+    def build(self, recipe) -> SolidModel:
+        """The solid of a `SolidRecipe` (ValueError for one that cannot be built)."""
+        raise NotImplementedError
+
+    def size(self, section) -> tuple[int, int]:
+        """(degrees of freedom, elements) the solid will have, at least, before it is built."""
+        return 0, 0
+
+    def box(self, model: SolidModel) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1): the solid's extent in the granular plane [m]."""
+        r = model.recipe
+        if r is None:
+            raise ValueError(f"a {self.name} solid built without a recipe has no known extent")
+        return float(r.x0), float(r.y0), float(r.x0 + r.width), float(r.y0 + r.length)
+
+    def shape(self, model: SolidModel, u: np.ndarray | None = None, scale: float = 0.0) -> Shape:
+        """The solid drawn with its nodes moved by scale * u (u: (n_nodes, 2), as full_displacement)."""
+        raise ValueError(f"a {self.name} solid has no elements to draw")
+
+    def energy_cells(self, model: SolidModel, q, v) -> Patches:
+        """The energy density w of eq. (14) on the cells that pictures colour."""
+        raise ValueError(f"a {self.name} solid stores no energy")
+
+    def export_cells(self, model: SolidModel) -> list[tuple[str, np.ndarray]]:
+        """The solid's cells for meshio: (cell type, connectivity) pairs."""
+        return []
+
+    def stress(self, model: SolidModel, x: np.ndarray, E: float, nu: float) -> dict[str, np.ndarray]:
+        """Stress cell data [Pa] of the full nodal DOF vector x = T q, by name."""
+        return {}
+
+    def mode_kinds(self, model: SolidModel, shapes, which) -> list[str]:
+        """The kind of each mode `which` (columns of shapes): bending, axial or bulk."""
+        return ["rigid" for _ in which]
+
+    def wave_lines(self, model: SolidModel, samples: int | None = None) -> LineSampling:
+        """How its wavefield is sampled (ValueError for a kind without one)."""
+        raise ValueError(f"a {self.name} solid has no wavefield (a plate or a beam built from its recipe has)")
+
+    def branches(self, model: SolidModel, k: np.ndarray, count: int = 3) -> dict[str, np.ndarray]:
+        """Its analytic dispersion branches over wavenumbers k [rad/m]: frequency [Hz] by name."""
+        raise ValueError(f"a {self.name} solid has no dispersion branches")
+
+
+class RigidKind(SolidKind):
+    """A rigid, immovable solid: no DOFs; its contact points never move."""
+
+    name = "rigid"
+    elastic = False
+
+    def build(self, recipe) -> SolidModel:
+        return rigid_solid([(c.name, c.position, c.normal) for c in recipe.contacts])
 
 
 def rigid_solid(contacts_positions: list[tuple[str, tuple[float, float], tuple[float, float]]]) -> SolidModel:

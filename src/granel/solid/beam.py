@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, Material, Slab, SolidModel
+from .base import ContactPoint, LineSampling, Material, Patches, Shape, Slab, SolidKind, SolidModel
+from .dispersion import euler_bernoulli_frequency
 
 
 def hermite_stiffness(EI: float, l: float) -> np.ndarray:
@@ -104,3 +105,109 @@ def clamped_clamped_periods(E, rho, width, thickness, length, count=5) -> np.nda
     I = thickness * width**3 / 12.0
     w = np.array(roots) ** 2 * np.sqrt(E * I / (rho * A * length**4))
     return 2 * np.pi / w
+
+
+STRIPS = 21  # strips across the depth on which pictures spread a beam element's energy
+
+
+def energy_density_strips(model: SolidModel, q, v, strips: int = STRIPS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The paper's spreading of beam element energies across the width (Sec. IV): kinetic energy
+    uniform across the depth, strain energy parabolic (12 s^2 times its mean, zero on the neutral
+    axis, s = across / depth in [-1/2, 1/2]), each strip given its mean, so that the strips
+    integrate back to the element's energy exactly. Returns (x edges (strips+1,), y edges
+    (ne+1,), w (ne, strips)) [m, m, J/m^3]."""
+    kin, pot = model.element_energies(q, v)
+    vol = model.element_volume
+    s = np.linspace(-0.5, 0.5, strips + 1)
+    mean = 4.0 * (s[1:] ** 3 - s[:-1] ** 3) / np.diff(s)  # the mean of 12 s^2 over each strip
+    w = (kin / vol)[:, None] + (pot / vol)[:, None] * mean[None, :]
+    return model.nodes[0, 0] + s * model.info["width"], model.nodes[:, 1], w
+
+
+# second derivatives d^2/ds^2 of the Hermite cubics N1 = 1 - 3s^2 + 2s^3, N2 = l (s - 2s^2 + s^3),
+# N3 = 3s^2 - 2s^3, N4 = l (s^3 - s^2) at the element centre s = 1/2: (0, -l, 0, l); d/dy = (1/l) d/ds
+HERMITE_D2_CENTRE = (0.0, -1.0, 0.0, 1.0)  # times (1/l^2, 1/l, 1/l^2, 1/l)
+
+
+def bending_stress(model: SolidModel, E: float, x: np.ndarray) -> dict[str, np.ndarray]:
+    """The beam's outer-fibre bending stress E (h/2) |w''| [Pa] at each element's centre, (ne,),
+    from the full DOF vector x (= T q: deflection, rotation dw/dy at each node), w'' from the
+    element's Hermite cubic; h = the section depth in the bending plane (`info["width"]`)."""
+    x = np.asarray(x, float)
+    i, j = np.asarray(model.elements).T
+    l = model.nodes[j, 1] - model.nodes[i, 1]
+    a, b, c, d = HERMITE_D2_CENTRE
+    curvature = (a * x[2 * i] / l + b * x[2 * i + 1] + c * x[2 * j] / l + d * x[2 * j + 1]) / l
+    return {"bending_stress": E * model.info["width"] / 2 * np.abs(curvature)}
+
+
+class BeamKind(SolidKind):
+    """The Euler-Bernoulli beam of eq. (9) (`build_beam`), drawn as its centre line."""
+
+    name = "beam"
+    fields = SolidKind.fields | {"material", "thickness", "beam_elements", "clamped"}
+
+    def recipe_fields(self, section, material) -> dict:  # Poisson's ratio unused: it keeps its default
+        return super().recipe_fields(section, material) | dict(
+            thickness=section.thickness, E=material.E, rho=material.rho, beam_elements=section.beam_elements,
+            clamped=tuple(section.clamped))
+
+    def build(self, recipe) -> SolidModel:
+        r = recipe
+        return build_beam(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
+                          r.clamped)
+
+    def size(self, section) -> tuple[int, int]:
+        """Two DOFs (deflection, rotation) per node, before clamping."""
+        return 2 * (section.beam_elements + 1), section.beam_elements
+
+    def box(self, model):
+        """Its node line widened by the section's depth."""
+        xm, half = float(model.nodes[0, 0]), 0.5 * model.info["width"]
+        return xm - half, float(model.nodes[:, 1].min()), xm + half, float(model.nodes[:, 1].max())
+
+    def shape(self, model, u=None, scale=0.0) -> Shape:
+        xy = model.nodes + (scale * u if u is not None else 0.0)
+        return Shape(line=np.column_stack([xy[:, 0], model.nodes[:, 1]]))
+
+    def energy_cells(self, model, q, v) -> Patches:
+        """The element energies spread across the depth (`energy_density_strips`): ne x 21 rectangles."""
+        xe, ys, w = energy_density_strips(model, q, v)
+        X0, Y0 = np.meshgrid(xe[:-1], ys[:-1])
+        X1, Y1 = np.meshgrid(xe[1:], ys[1:])
+        polys = np.stack([np.stack([X0, Y0], -1), np.stack([X1, Y0], -1), np.stack([X1, Y1], -1),
+                          np.stack([X0, Y1], -1)], axis=2)  # (ne, nx, 4, 2)
+        return Patches(polys.reshape(-1, 4, 2), w.ravel())
+
+    def export_cells(self, model):
+        return [("line", np.asarray(model.elements, dtype=np.int64))]
+
+    def stress(self, model, x, E, nu):
+        return bending_stress(model, E, x)
+
+    def mode_kinds(self, model, shapes, which):
+        return ["bending" for _ in which]
+
+    def wave_lines(self, model, samples=None) -> LineSampling:
+        """Its one line of nodes: every node that is not clamped, the deflection sampled."""
+        r = model.recipe
+        if r is None:
+            return super().wave_lines(model, samples)
+        ne = len(model.nodes) - 1
+        clamped = tuple(bool(c) for c in r.clamped)
+        count = {(True, True): ne - 1, (False, False): ne + 1}.get(clamped, ne)
+        full = model.T.shape[0]
+
+        def sampler(y):
+            at = np.rint((np.asarray(y) - r.y0) / (r.length / ne)).astype(int)
+            return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), 2 * at)), shape=(len(at), full))
+
+        return LineSampling(np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",), count,
+                            float(r.length / ne), sampler)
+
+    def branches(self, model, k, count=3):
+        """The Euler-Bernoulli branch (EB) of its EI and rho A."""
+        return {"EB": euler_bernoulli_frequency(k, model.info["EI"], model.info["rhoA"])}
+
+
+BEAM = BeamKind()

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..guard.jit import njit
 from .base import SolidModel
+from .kinds import kind_of
 
 
 @njit(cache=True, inline="always")
@@ -136,50 +137,11 @@ def _lowest_up_to(K, M, w2_cut: float, top: int) -> tuple[np.ndarray, np.ndarray
     return w2, z
 
 
-def _sample_grid(model: SolidModel, nx=9, ny=81):
-    x0, x1 = model.nodes[:, 0].min(), model.nodes[:, 0].max()
-    y0, y1 = model.nodes[:, 1].min(), model.nodes[:, 1].max()
-    xs = np.linspace(x0, x1, nx)
-    ys = np.linspace(y0, y1, ny)
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    return X.ravel(), Y.ravel(), 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-
-
-def _mirror_probes(model: SolidModel):
-    """Point-evaluation matrices at a sample grid and at its two mirror images (cached)."""
-    cached = getattr(model, "_mirror_probes", None)
-    if cached is None:
-        basis = model.basis
-        X, Y, xc, yc = _sample_grid(model)
-        cached = (basis.probes(np.vstack([X, Y])), basis.probes(np.vstack([2 * xc - X, Y])),
-                  basis.probes(np.vstack([X, 2 * yc - Y])), len(X))
-        model._mirror_probes = cached
-    return cached
-
-
-def symmetry_coefficients(model: SolidModel, shape: np.ndarray) -> tuple[float, float]:
-    """(width-mirror, up-down-mirror) symmetry of a plate field in reduced coordinates, each in
-    [-1, 1]: +1 symmetric, -1 antisymmetric. The width mirror flips u_x, the up-down one u_y."""
-    P, Pw, Pu, npt = _mirror_probes(model)
-    full = model.T @ shape
-    u, uw, uu = P @ full, Pw @ full, Pu @ full
-    mw = np.concatenate([-uw[:npt], uw[npt:]])
-    mu = np.concatenate([uu[:npt], -uu[npt:]])
-    return float(u @ mw / (u @ u)), float(u @ mu / (u @ u))
-
-
 def classify_modes(model: SolidModel, modes: Modes, which=None) -> list[str]:
-    """Kind of each mode (bending / axial / bulk); all beam modes are bending."""
+    """Kind of each mode (bending / axial / bulk, as the solid's kind tells them:
+    `SolidKind.mode_kinds`); all beam modes are bending."""
     idx = range(modes.count) if which is None else which
-    if model.kind == "beam":
-        return ["bending" for _ in idx]
-    if model.kind != "plate":
-        return ["rigid" for _ in idx]
-    kinds = []
-    for k in idx:
-        s_width, s_updown = symmetry_coefficients(model, modes.shapes[:, k])
-        kinds.append("bending" if s_width < 0 else ("axial" if s_updown < 0 else "bulk"))
-    return kinds
+    return kind_of(model).mode_kinds(model, modes.shapes, idx)
 
 
 def at_dofs(B, shapes, columns=slice(None)) -> np.ndarray:

@@ -9,12 +9,16 @@ node, so M_r = T'MT and K_r = T'KT.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, Material, Slab, SolidModel
+from .base import ContactPoint, LineSampling, Material, Patches, Shape, Slab, SolidKind, SolidModel
+from .dispersion import lamb_branches, plane_stress_speeds
+
+Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
 
 
 @dataclass(frozen=True)
@@ -458,3 +462,170 @@ def assemble_plate(slab: Slab, material: Material, layers: list[LayerSpec], mesh
     model.basis = basis
     model.node_dofs = np.vstack([node_dofx, node_dofy])
     return model
+
+
+def element_stress(model: SolidModel, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
+    """The plate's element-mean plane-stress Cauchy stress and von Mises stress [Pa], (ne,) each,
+    from the full nodal DOF vector x (= T q, scikit-fem's DOF order), with the plate's own
+    plane-stress law (`plane_stress_law`, eq. 7) at its Gauss points."""
+    from skfem.helpers import sym_grad
+
+    basis = model.basis
+    S = plane_stress_law(E, nu)(sym_grad(basis.interpolate(np.asarray(x, float))))  # (2, 2, ne, nqp)
+    dx = basis.dx  # quadrature weight x Jacobian (ne, nqp)
+    S = (S * dx).sum(axis=-1) / dx.sum(axis=-1)
+    sxx, syy, sxy = S[0, 0], S[1, 1], S[0, 1]
+    vm = np.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * sxy**2)
+    return {"stress_xx": sxx, "stress_yy": syy, "stress_xy": sxy, "von_mises": vm}
+
+
+def quadratic_weights(y: np.ndarray, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (n, 3), weights (n, 3)) of the quadratic Lagrange interpolation at points y
+    through the node triples (vertex, mid-side, vertex) of a line whose sorted node heights are
+    `nodes` (2 m + 1 of them)."""
+    sides = (len(nodes) - 1) // 2
+    m = np.clip(np.searchsorted(nodes[2::2], y, side="left"), 0, sides - 1)
+    idx = np.stack([2 * m, 2 * m + 1, 2 * m + 2], axis=1)
+    p = nodes[idx]
+    w = np.empty_like(p)
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        w[:, a] = (y - p[:, b]) * (y - p[:, c]) / ((p[:, a] - p[:, b]) * (p[:, a] - p[:, c]))
+    return idx, w
+
+
+def _sample_grid(model: SolidModel, nx=9, ny=81):
+    x0, x1 = model.nodes[:, 0].min(), model.nodes[:, 0].max()
+    y0, y1 = model.nodes[:, 1].min(), model.nodes[:, 1].max()
+    xs = np.linspace(x0, x1, nx)
+    ys = np.linspace(y0, y1, ny)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    return X.ravel(), Y.ravel(), 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+
+
+def _mirror_probes(model: SolidModel):
+    """Point-evaluation matrices at a sample grid and at its two mirror images (cached)."""
+    cached = getattr(model, "_mirror_probes", None)
+    if cached is None:
+        basis = model.basis
+        X, Y, xc, yc = _sample_grid(model)
+        cached = (basis.probes(np.vstack([X, Y])), basis.probes(np.vstack([2 * xc - X, Y])),
+                  basis.probes(np.vstack([X, 2 * yc - Y])), len(X))
+        model._mirror_probes = cached
+    return cached
+
+
+def symmetry_coefficients(model: SolidModel, shape: np.ndarray) -> tuple[float, float]:
+    """(width-mirror, up-down-mirror) symmetry of a plate field in reduced coordinates, each in
+    [-1, 1]: +1 symmetric, -1 antisymmetric. The width mirror flips u_x, the up-down one u_y."""
+    P, Pw, Pu, npt = _mirror_probes(model)
+    full = model.T @ shape
+    u, uw, uu = P @ full, Pw @ full, Pu @ full
+    mw = np.concatenate([-uw[:npt], uw[npt:]])
+    mu = np.concatenate([uu[:npt], -uu[npt:]])
+    return float(u @ mw / (u @ u)), float(u @ mu / (u @ u))
+
+
+class PlateKind(SolidKind):
+    """The plane-stress plate of eq. (7) (`build_plate`), drawn as its Q8 elements."""
+
+    name = "plate"
+    fields = SolidKind.fields | {"material", "thickness", "mesh", "clamped"}
+
+    def layer(self, section) -> float:
+        return section.mesh.layer_fraction
+
+    def recipe_fields(self, section, material) -> dict:
+        m = section.mesh
+        return super().recipe_fields(section, material) | dict(
+            thickness=section.thickness, E=material.E, rho=material.rho, nu=material.nu, clamped=tuple(section.clamped),
+            mesh=PlateMesh(m.nx, m.growth, m.max_size, m.x_growth, m.rigid_layers))
+
+    def build(self, recipe) -> SolidModel:
+        r = recipe
+        layers = [LayerSpec(c.name, c.edge, c.position[1], c.layer) for c in r.contacts]
+        return build_plate(r.slab, r.material, layers, r.mesh, r.clamped)
+
+    def size(self, section) -> tuple[int, int]:
+        """Rows of elements at least length / mesh.max_size (`plate_mesh`); Q8 nodes
+        (2 nx + 1)(2 ny + 1) - nx ny, two DOFs each."""
+        nx = section.mesh.nx
+        ny = max(2, math.ceil(section.length / section.mesh.max_size))
+        return 2 * ((2 * nx + 1) * (2 * ny + 1) - nx * ny), nx * ny
+
+    def box(self, model):
+        """Its nodes' extent."""
+        (x0, y0), (x1, y1) = model.nodes.min(axis=0), model.nodes.max(axis=0)
+        return float(x0), float(y0), float(x1), float(y1)
+
+    def shape(self, model, u=None, scale=0.0) -> Shape:
+        xy = model.nodes + (scale * u if u is not None else 0.0)
+        return Shape(polygons=xy[np.asarray(model.elements)[:, Q8_OUTLINE]])
+
+    def energy_cells(self, model, q, v) -> Patches:
+        return Patches(self.shape(model).polygons, model.element_energy_density(q, v))
+
+    def export_cells(self, model):
+        """Q8 elements: corners, then the midpoints of the sides 0-1, 1-2, 2-3, 3-0 (VTK's quad8)."""
+        return [("quad8", np.asarray(model.elements, dtype=np.int64))]
+
+    def stress(self, model, x, E, nu):
+        return element_stress(model, E, nu, x)
+
+    def mode_kinds(self, model, shapes, which):
+        """Bending if antisymmetric across the width, else axial if antisymmetric up-down, else
+        bulk (`symmetry_coefficients`)."""
+        kinds = []
+        for k in which:
+            s_width, s_updown = symmetry_coefficients(model, shapes[:, k])
+            kinds.append("bending" if s_width < 0 else ("axial" if s_updown < 0 else "bulk"))
+        return kinds
+
+    def wave_lines(self, model, samples=None) -> LineSampling:
+        """Its vertex columns (2 ny + 1 nodes each), both components, sampled at `samples` heights
+        (default: two per the longest node gap along the length) by quadratic interpolation; the
+        mass per length rho h times each column's trapezoid share of the width."""
+        r = model.recipe
+        if r is None:
+            return super().wave_lines(model, samples)
+        nodes = np.asarray(model.nodes, float)
+        ny = int(model.info["ny"])
+        tol = 1e-9 * r.width
+        xs = np.unique(np.round(nodes[:, 0] / tol) * tol)
+        columns = [np.flatnonzero(np.abs(nodes[:, 0] - x) < 2 * tol) for x in xs]
+        columns = [c[np.argsort(nodes[c, 1])] for c in columns if len(c) == 2 * ny + 1]
+        x = np.array([nodes[c[0], 0] for c in columns])
+        gaps = max(float(np.diff(nodes[c, 1]).max()) for c in columns)
+        count = int(math.ceil(2 * r.length / gaps)) if samples is None else int(samples)
+        full = model.T.shape[0]
+
+        def sampler(y):
+            rows, cols, vals = [], [], []
+            n = len(y)
+            for i, c in enumerate(columns):
+                idx, w = quadratic_weights(np.asarray(y, float), nodes[c, 1])
+                for comp in (0, 1):
+                    dofs = np.asarray(model.node_dofs[comp])[c][idx]
+                    rows.append(np.repeat((2 * i + comp) * n + np.arange(n), 3))
+                    cols.append(dofs.ravel())
+                    vals.append(w.ravel())
+            return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                 shape=(2 * len(columns) * n, full))
+
+        share = np.zeros(len(x))  # the trapezoid rule across the width
+        share[:-1] += np.diff(x) / 2
+        share[1:] += np.diff(x) / 2
+        return LineSampling(x, r.rho * r.thickness * share, ("x", "y"), count, 2 * gaps, sampler)
+
+    def branches(self, model, k, count=3):
+        """The Rayleigh-Lamb branches S0, S1, ..., A0, A1, ... of a plane-stress strip as wide as the
+        plate, with its recipe's E, nu, rho."""
+        r = model.recipe
+        lamb = lamb_branches(k, r.width, plane_stress_speeds(r.E, r.nu, r.rho), count)
+        out = {}
+        for family, rows in (("S", lamb.symmetric), ("A", lamb.antisymmetric)):
+            out.update({f"{family}{n}": rows[n] for n in range(len(rows))})
+        return out
+
+
+PLATE = PlateKind()

@@ -8,9 +8,9 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 
-from .base import Material, Slab, SolidModel, rigid_solid
-from .beam import build_beam
-from .plate import LayerSpec, PlateMesh, build_plate
+from .base import Material, Slab, SolidModel
+from .kinds import kind_of
+from .plate import PlateMesh
 
 
 @dataclass(frozen=True)
@@ -30,8 +30,7 @@ class RecipeContact:
 
 @dataclass(frozen=True)
 class SolidRecipe:
-    """The arguments of `solid.plate.build_plate`, `solid.beam.build_beam` or
-    `solid.base.rigid_solid` (kind "plate", "beam" or "rigid"): the rectangle x0, y0, width, length
+    """What a solid of `kind` (`solid.kinds`) is built from: the rectangle x0, y0, width, length
     and the out-of-plane thickness [m], Young's modulus E [Pa], Poisson's ratio nu, density rho
     [kg/m^3], the contacts, the plate's mesh, the beam's element count and the clamped ends
     (bottom, top). Fields a kind does not use keep their defaults."""
@@ -77,18 +76,9 @@ class SolidRecipe:
 
 
 def build_solid_model(recipe: SolidRecipe) -> SolidModel:
-    """The solid of a recipe, carrying it (`SolidModel.recipe`); ValueError from the builders (a
-    beam contact off a node or on a clamped one, layers that overlap, ...)."""
-    r = recipe
-    if r.kind == "rigid":
-        model = rigid_solid([(c.name, c.position, c.normal) for c in r.contacts])
-    elif r.kind == "beam":
-        model = build_beam(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
-                           r.clamped)
-    elif r.kind == "plate":
-        layers = [LayerSpec(c.name, c.edge, c.position[1], c.layer) for c in r.contacts]
-        model = build_plate(r.slab, r.material, layers, r.mesh, r.clamped)
-    else:
-        raise ValueError(f"unknown solid kind {r.kind!r} (plate, beam or rigid)")
+    """The solid of a recipe, built by its kind (`solid.kinds`) and carrying the recipe
+    (`SolidModel.recipe`); ValueError from the builders (a beam contact off a node or on a clamped
+    one, layers that overlap, an unknown kind, ...)."""
+    model = kind_of(recipe.kind).build(recipe)
     model.recipe = recipe
     return model

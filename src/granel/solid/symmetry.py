@@ -22,7 +22,7 @@ def mirror_operator(model) -> sp.csr_matrix | None:
     x = T q; the reflection of the full DOFs (u_x kept, u_y flipped, node to mirror node) is
     carried to q by T's left inverse, and must come out a signed permutation."""
     nodes, node_dofs = getattr(model, "nodes", None), getattr(model, "node_dofs", None)
-    if nodes is None or node_dofs is None or getattr(model, "kind", "") != "plate":
+    if nodes is None or node_dofs is None or len(node_dofs) != 2:  # a planar mesh's u_x and u_y
         return None
     nodes = np.asarray(nodes, float)
     size = float(np.ptp(nodes, axis=0).max())

@@ -17,6 +17,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .. import scenario as S
+from ..scenario.usage import SOLID_FIELDS
 from .modes import study_mode
 from .screening import ScreeningSpec
 from .sweep import CaseSpec, case_scenarios, check_base, check_mode
@@ -472,7 +473,7 @@ def _why_inert(spec: DesignSpec, base_dir: Path, var: VariableSpec) -> str:
         return "the design has no solid" if kind == "none" else f"the {kind} solid does not use {'.'.join(parts[1:])}"
     if parts[0] == "materials" and len(parts) >= 2:
         used = {n for m in sc.media for n in [m.material, *(m.materials or [])]}
-        if sc.solid is not None and sc.solid.kind in ("beam", "plate"):
+        if S.elastic_solid(sc) is not None and "material" in SOLID_FIELDS[sc.solid.kind]:
             used.add(sc.solid.material)
         if parts[1] not in used:
             return f"no granule and no elastic solid is made of {parts[1]}"

@@ -144,13 +144,12 @@ def optuna_figures(spec: DesignSpec, study, out: Path) -> list[Path]:
 
 def draw_design(ax, sc, title: str) -> None:
     """A scenario's granules, walls and solid (no labels), in mm."""
-    from ..scenario.build import built_models
-    from ..scenario.build import present_solid
+    from ..scenario.build import built_models, elastic_solid
     from ..viz.drawing import MM, draw_granules, draw_solid, draw_walls
 
     system, model = built_models(sc)
     depth = 0.04 * float(np.ptp(system.pos0[:, 1]) + 2 * system.radius.max()) * MM
-    if present_solid(sc) is not None and (sc.solid.kind != "rigid" or system.solid_contacts):
+    if elastic_solid(sc) is not None or system.solid_contacts:
         draw_solid(ax, sc, model, "design")  # (a rigid block parked away from the granules is left out)
     draw_granules(ax, system, "design", labels=False)
     if np.ptp(system.E) > 0:  # granules of several materials: each marked with its modulus

@@ -48,9 +48,9 @@ def scenario_modes(sc: S.Scenario, count: int, plot=None) -> ScenarioModes:
 
     if count < 1:
         raise S.ScenarioError(f"--count {count}: give a whole number of modes >= 1")
-    if sc.solid is None or sc.solid.kind in ("rigid", "none"):
-        raise S.ScenarioError(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}; choose --solid plate or "
-                              "--solid beam")
+    if S.elastic_solid(sc) is None:
+        raise S.ScenarioError(f"modes: the solid is {sc.solid.kind if sc.solid else 'none'}, which has no modes; choose "
+                              "an elastic one (--solid plate or --solid beam)")
     system, _, _ = S.build_granular(sc, sc.base)
     solid = S.build_solid(sc, system)
     want = max(count, CLASSIFIED if plot is not None else 0)

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..guard.exits import InputError
 from ..io.results import require
+from ..solid.kinds import is_elastic
 
 FILES = ("wavefield.nc", "kt.png", "fk.png", "moments.png", "bands.png")
 MOVIE = "bands.mp4"
@@ -101,8 +102,8 @@ def read_wavefield_result(path) -> "xr.Dataset":
 
     ds = load_result(path)
     kind = read_record(ds, path).solid_kind
-    if kind not in ("plate", "beam"):
-        raise InputError(f"{path}: its solid is {kind or 'absent'}: a wavefield needs a plate or a beam "
+    if not is_elastic(kind):
+        raise InputError(f"{path}: its solid is {kind or 'absent'}: a wavefield needs an elastic solid "
                          "(run with --solid plate or --solid beam)")
     require(ds, ["solid_time"], f"{path}: a wavefield")
     if ds.sizes.get("solid_time", 0) < 4:

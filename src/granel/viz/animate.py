@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 
 from ..analysis.density import granule_energies, granule_energy_density, granule_states  # noqa: E402
 from ..analysis.result_model import result_modes, result_solid, result_system  # noqa: E402
-from .plots import Q8_OUTLINE  # noqa: E402
+from ..solid.kinds import kind_of  # noqa: E402
 from ..io.model import read_record, read_result  # noqa: E402
 from ..io.results import ResultFileError  # noqa: E402,F401 - the error of a result that cannot be used
 from ..io.results import require, require_states  # noqa: E402
@@ -116,15 +116,12 @@ class FramePlan:
     xlim: tuple[float, float]
     ylim: tuple[float, float]
     magnification: float | None = None
-    solid_kind: str = "rigid"  # plate | beam | rigid (no solid drawn)
     granule_w: np.ndarray | None = None  # (F, n) w / w0, clipped at W_MIN (energy density)
-    plate_verts: np.ndarray | None = None  # (F, ne, 8, 2) magnified deformed element outlines
-    plate_w: np.ndarray | None = None  # (F, ne) element w / w0, clipped
-    beam_x: np.ndarray | None = None  # (F, nn) deformed centre line x (deformation)
-    beam_y: np.ndarray | None = None  # (nn,) node heights
-    beam_edges: tuple | None = None  # (x edges (nx+1,), y edges (ne+1,)) of the energy grid
-    beam_w: np.ndarray | None = None  # (F, ne, nx) w / w0 across the width, clipped
-    model: object = None  # the SolidModel (draws the plate's initial outline)
+    # the solid, as its kind draws it (`SolidKind.shape`, `energy_cells`); all None: none drawn
+    solid_polygons: np.ndarray | None = None  # (F, P, k, 2) magnified deformed cells (deformation)
+    solid_line: np.ndarray | None = None  # (F, n, 2) magnified deformed centre line (deformation)
+    solid_cells: np.ndarray | None = None  # (P, k, 2) the cells coloured by energy density
+    solid_w: np.ndarray | None = None  # (F, P) their w / w0, clipped
     walls: list = dc_field(default_factory=list)  # ((x0, x1), (y0, y1)) of each rigid wall, static
 
     @property
@@ -159,14 +156,14 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
     idx = frame_indices(len(times_all), max_frames)
     times = times_all[idx].astype(float)
     xlim, ylim = _limits(ds, system, model)
-    has_solid = model.kind in ("plate", "beam") and "solid_time" in ds
+    kind = kind_of(model)
+    has_solid = kind.elastic and "solid_time" in ds
     modes = result_modes(ds) if has_solid and "solid_x" not in ds else None
     require_states(ds, "a movie")
-    if model.kind in ("plate", "beam"):
+    if kind.elastic:
         require(ds, ["solid_time"], "a movie of the solid")
     X, Yp = ds["x"].values[idx], ds["y"].values[idx]
     plan = FramePlan(field, times, np.asarray(system.radius, float), np.stack([X, Yp], axis=-1), tuple(xlim), tuple(ylim),
-                     solid_kind=model.kind if has_solid else "rigid", model=model,
                      walls=[((w.p0[0], w.p1[0]), (w.p0[1], w.p1[1])) for w in system.walls])
     if field == "deformation":
         mag = magnification or default_magnification(ds)
@@ -175,16 +172,15 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
         plan.centres = np.stack([x0 + mag * (X - x0), y0 + mag * (Yp - y0)], axis=-1)
         if has_solid:
             Q, _ = solid_states(ds, times, modes)
-            U = np.stack([model.full_displacement(q) for q in Q])  # (F, nn, 2)
-            if model.kind == "plate":
-                plan.plate_verts = (model.nodes[None] + mag * U)[:, model.elements[:, Q8_OUTLINE]]
+            shapes = [kind.shape(model, model.full_displacement(q), mag) for q in Q]
+            if shapes[0].polygons is not None:
+                plan.solid_polygons = np.stack([s.polygons for s in shapes])
             else:
-                plan.beam_x = model.nodes[None, :, 0] + mag * U[:, :, 0]
-                plan.beam_y = model.nodes[:, 1].copy()
+                plan.solid_line = np.stack([s.line for s in shapes])
         return plan
 
     # energy density, eq. (14): w / w0 with w0 the excited granule's peak kinetic energy density
-    from ..analysis.density import beam_energy_density_grid, excited_reference, solid_energy_density
+    from ..analysis.density import excited_reference
 
     w0 = excited_reference(ds)
     SU = None
@@ -192,13 +188,9 @@ def plan_frames(ds, field: str = "deformation", magnification: float | None = No
         Q, V = solid_states(ds, times, modes)
         B = model.contact_map()
         SU = np.ascontiguousarray((B @ Q.T).T).reshape(len(times), -1, 2)  # C order, as the kernel was compiled for
-        if model.kind == "plate":
-            plan.plate_w = np.clip(np.stack([solid_energy_density(model, q, v) for q, v in zip(Q, V)]) / w0, W_MIN, None)
-        else:
-            grids = [beam_energy_density_grid(model, q, v) for q, v in zip(Q, V)]
-            xs, ys, _ = grids[0]
-            plan.beam_edges = (np.linspace(xs[0], xs[-1], len(xs) + 1), ys)
-            plan.beam_w = np.clip(np.stack([g[2] for g in grids]) / w0, W_MIN, None)
+        cells = [kind.energy_cells(model, q, v) for q, v in zip(Q, V)]
+        plan.solid_cells = cells[0].polygons
+        plan.solid_w = np.clip(np.stack([c.values for c in cells]) / w0, W_MIN, None)
     e = granule_energies(system, granule_states(ds, idx), SU)
     plan.granule_w = np.clip(granule_energy_density(system, e, system.radius) / w0, W_MIN, None)
     return plan
@@ -217,7 +209,8 @@ class MovieFigure:
         from matplotlib.colors import LogNorm
 
         from . import figures  # noqa: F401 - the figures' rcParams (font size, grid)
-        from .plots import draw_plate
+        from ..solid.base import Patches, Shape
+        from .plots import draw_patches, draw_shape
 
         self.plan = plan
         self.fig, self.ax = fig, ax = plt.subplots(figsize=figsize, dpi=dpi)
@@ -237,19 +230,12 @@ class MovieFigure:
             self.granules.set_array(plan.granule_w[0])
         ax.add_collection(self.granules)
         self.solid = None
-        if plan.solid_kind == "plate":
-            if energy:
-                self.solid = draw_plate(ax, plan.model, field=plan.plate_w[0], cmap=CMAP, color="none", lw=0)
-                self.solid.set_norm(self.norm)
-            else:
-                self.solid = draw_plate(ax, plan.model, color="C3", lw=0.25)
-                self.solid.set_verts(plan.plate_verts[0])
-        elif plan.solid_kind == "beam":
-            if energy:
-                xe, ye = plan.beam_edges
-                self.solid = ax.pcolormesh(xe, ye, plan.beam_w[0], cmap=CMAP, norm=self.norm, shading="flat")
-            else:
-                (self.solid,) = ax.plot(plan.beam_x[0], plan.beam_y, "C3-", lw=2)
+        if energy and plan.solid_cells is not None:
+            self.solid = draw_patches(ax, Patches(plan.solid_cells, plan.solid_w[0]), CMAP, self.norm)
+        elif plan.solid_polygons is not None:
+            self.solid = draw_shape(ax, Shape(polygons=plan.solid_polygons[0]), color="C3", lw=0.25)
+        elif plan.solid_line is not None:
+            self.solid = draw_shape(ax, Shape(line=plan.solid_line[0]), color="C3", line_lw=2)
         if energy:
             ax.set_xticks([])
             ax.set_yticks([])
@@ -268,14 +254,12 @@ class MovieFigure:
         self.granules.set_offsets(p.centres[i])
         if p.field == "energy-density":
             self.granules.set_array(p.granule_w[i])
-            if p.solid_kind == "plate":
-                self.solid.set_array(p.plate_w[i])
-            elif p.solid_kind == "beam":
-                self.solid.set_array(p.beam_w[i])
-        elif p.solid_kind == "plate":
-            self.solid.set_verts(p.plate_verts[i])
-        elif p.solid_kind == "beam":
-            self.solid.set_xdata(p.beam_x[i])
+            if p.solid_w is not None:
+                self.solid.set_array(p.solid_w[i])
+        elif p.solid_polygons is not None:
+            self.solid.set_verts(p.solid_polygons[i])
+        elif p.solid_line is not None:
+            self.solid.set_data(p.solid_line[i, :, 0], p.solid_line[i, :, 1])
         self.title.set_text(p.title(i))
 
     def _prepare_blit(self) -> None:

@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
+from ..solid.kinds import kind_of  # noqa: E402
 from .model_geometry import solid_box  # noqa: E402
-from .plots import Q8_OUTLINE  # noqa: E402
 
 MM = 1e3  # drawing unit: millimetres per metre
 
@@ -99,9 +99,10 @@ def draw_dimension(ax, a, b, panel, name, colour="k"):
 
 
 def _element_polygons(model, elements=None) -> list[np.ndarray]:
-    """Q8 element outlines [mm] through corner and mid-side nodes."""
-    elements = model.elements if elements is None else model.elements[elements]
-    return [model.nodes[e[Q8_OUTLINE]] * MM for e in elements]
+    """The solid's element outlines [mm] (`SolidKind.shape`: a plate's Q8 through its corner and
+    mid-side nodes), all or those of `elements`."""
+    polygons = kind_of(model).shape(model).polygons
+    return list((polygons if elements is None else polygons[elements]) * MM)
 
 
 # ------------------------------------------------------------------ the planar model's parts (Fig. 1)
@@ -109,12 +110,13 @@ def _element_polygons(model, elements=None) -> list[np.ndarray]:
 
 def draw_solid(ax, sc, model, panel, box=None):
     """The elastic solid of Fig. 1(b): outline, clamped ends (hatched), free lateral edges."""
-    x0, y0, x1, y1 = np.array(box if box is not None else solid_box(sc, model)) * MM
+    kind = kind_of(model)
+    x0, y0, x1, y1 = np.array(box if box is not None else solid_box(model)) * MM
     ax.add_patch(_tag(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="k", lw=0.8,
-                                hatch="x" if model.kind == "rigid" else None), panel, "solid", model.kind))
-    if model.kind == "beam":
-        ym = model.nodes[:, 1] * MM
-        ax.plot(model.nodes[:, 0] * MM, ym, color="k", lw=0.8, ls="-.")
+                                hatch=None if kind.elastic else "x"), panel, "solid", model.kind))
+    line = kind.shape(model).line if kind.elastic else None
+    if line is not None:  # a solid drawn as its centre line (the beam's neutral axis)
+        ax.plot(line[:, 0] * MM, line[:, 1] * MM, color="k", lw=0.8, ls="-.")
     depth = 0.03 * (y1 - y0)
     bottom, top = sc.solid.clamped
     if bottom:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..guard.writing import fsync_path, staging_folder
 from ..io.results import require, require_states
+from ..solid.kinds import kind_of
 
 FORMATS = ("vtk", "xdmf", "csv", "extxyz")
 EXTXYZ_PROPERTIES = "species:S:1:pos:R:3:radius:R:1:velo:R:3:omega:R:1"
@@ -77,7 +78,8 @@ def check_exportable(ds, formats, name="result") -> None:
 
 
 def has_solid(ds, model) -> bool:
-    return model.kind in ("plate", "beam") and "solid_time" in ds and model.nodes is not None
+    """Whether the result stores the motion of an elastic solid with nodes to export."""
+    return kind_of(model).elastic and "solid_time" in ds and model.nodes is not None
 
 
 def granule_frame(ds, system, k: int) -> dict[str, np.ndarray]:
@@ -92,10 +94,9 @@ def granule_frame(ds, system, k: int) -> dict[str, np.ndarray]:
 
 
 def solid_cells(model) -> list[tuple[str, np.ndarray]]:
-    """The solid's cells for meshio: Q8 plate elements (corners, then the midpoints of the sides
-    0-1, 1-2, 2-3, 3-0: VTK's quadratic quad order) or the beam's two-node elements."""
-    kind = "quad8" if model.kind == "plate" else "line"
-    return [(kind, np.asarray(model.elements, dtype=np.int64))]
+    """The solid's cells for meshio, as its kind gives them (`SolidKind.export_cells`: a plate's
+    quad8 elements in VTK's node order, a beam's two-node lines)."""
+    return kind_of(model).export_cells(model)
 
 
 def elastic_constants(model) -> tuple[float, float]:
@@ -103,49 +104,11 @@ def elastic_constants(model) -> tuple[float, float]:
     return float(model.recipe.E), float(model.recipe.nu)
 
 
-def plate_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
-    """The plate's element-mean plane-stress Cauchy stress and von Mises stress [Pa], (ne,) each,
-    from the full nodal DOF vector x (= T q, scikit-fem's DOF order).
-    Reuses the plate's basis (Q8 shape-function gradients at its Gauss points) and the plate's
-    own plane-stress law (`solid.plate.plane_stress_law`, eq. 7)."""
-    from skfem.helpers import sym_grad
-
-    from ..solid.plate import plane_stress_law
-
-    basis = model.basis
-    S = plane_stress_law(E, nu)(sym_grad(basis.interpolate(np.asarray(x, float))))  # (2, 2, ne, nqp)
-    dx = basis.dx  # quadrature weight x Jacobian (ne, nqp)
-    S = (S * dx).sum(axis=-1) / dx.sum(axis=-1)
-    sxx, syy, sxy = S[0, 0], S[1, 1], S[0, 1]
-    vm = np.sqrt(sxx**2 - sxx * syy + syy**2 + 3 * sxy**2)
-    return {"stress_xx": sxx, "stress_yy": syy, "stress_xy": sxy, "von_mises": vm}
-
-
-# second derivatives d^2/ds^2 of the Hermite cubics N1 = 1 - 3s^2 + 2s^3, N2 = l (s - 2s^2 + s^3),
-# N3 = 3s^2 - 2s^3, N4 = l (s^3 - s^2) at the element centre s = 1/2: (0, -l, 0, l); d/dy = (1/l) d/ds
-HERMITE_D2_CENTRE = (0.0, -1.0, 0.0, 1.0)  # times (1/l^2, 1/l, 1/l^2, 1/l)
-
-
-def beam_stress(model, E: float, x: np.ndarray) -> dict[str, np.ndarray]:
-    """The beam's outer-fibre bending stress E (h/2) |w''| [Pa] at each element's centre, (ne,),
-    from the full DOF vector x (= T q: deflection, rotation dw/dy at each node), w'' from the
-    element's Hermite cubic; h = the section depth in the bending plane (`info["width"]`)."""
-    x = np.asarray(x, float)
-    i, j = np.asarray(model.elements).T
-    l = model.nodes[j, 1] - model.nodes[i, 1]
-    a, b, c, d = HERMITE_D2_CENTRE
-    curvature = (a * x[2 * i] / l + b * x[2 * i + 1] + c * x[2 * j] / l + d * x[2 * j + 1]) / l
-    return {"bending_stress": E * model.info["width"] / 2 * np.abs(curvature)}
-
-
 def solid_stress(model, E: float, nu: float, x: np.ndarray) -> dict[str, np.ndarray]:
-    """The stress cell data of a plate (`plate_stress`) or beam (`beam_stress`), from the full
-    nodal DOF vector x = T q; {} for any other solid."""
-    if model.kind == "plate":
-        return plate_stress(model, E, nu, x)
-    if model.kind == "beam":
-        return beam_stress(model, E, x)
-    return {}
+    """The stress cell data [Pa] of a solid from its full nodal DOF vector x = T q, as its kind
+    computes them (`SolidKind.stress`: a plate's element-mean plane stress and von Mises stress, a
+    beam's outer-fibre bending stress); {} for a rigid solid."""
+    return kind_of(model).stress(model, np.asarray(x, float), E, nu)
 
 
 def solid_frames(ds, model, elastic: tuple[float, float]

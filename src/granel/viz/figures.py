@@ -18,6 +18,8 @@ from ..analysis.reciprocity import directed_velocity, excitation_of  # noqa: E40
 from ..analysis.result_model import result_solid, result_system  # noqa: E402
 from ..io.model import read_record  # noqa: E402
 from ..io.results import require, require_states  # noqa: E402
+from ..solid.base import Patches  # noqa: E402
+from ..solid.kinds import kind_of  # noqa: E402
 
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "savefig.dpi": 200, "figure.dpi": 100})
 
@@ -166,8 +168,8 @@ def granule_energies_at(ds, k: int, su=None):
 
 def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=None):
     """Granules and the solid coloured by the normalised energy density (14) at `time`."""
-    from ..analysis.density import beam_energy_density_grid, excited_reference, granule_energy_density, solid_energy_density
-    from .plots import draw_plate
+    from ..analysis.density import excited_reference, granule_energy_density
+    from .plots import draw_patches
 
     system, model = result_system(ds), result_solid(ds)
     w0 = excited_reference(ds)
@@ -182,13 +184,8 @@ def draw_energy_density(ax, ds, time: float, norm=None, cmap="inferno", modes=No
     pc = PatchCollection(patches, cmap=cmap, norm=norm, edgecolor="0.5", linewidth=0.3)
     pc.set_array(np.clip(wg, norm.vmin, None))
     ax.add_collection(pc)
-    if model.kind == "plate":
-        ws = solid_energy_density(model, q, v) / w0
-        draw_plate(ax, model, field=np.clip(ws, norm.vmin, None), cmap=cmap, color="none", lw=0)
-        ax.collections[-1].set_norm(norm)
-    else:
-        xs, ys, wb = beam_energy_density_grid(model, q, v)
-        ax.pcolormesh(np.linspace(xs[0], xs[-1], len(xs) + 1), ys, np.clip(wb / w0, norm.vmin, None), cmap=cmap, norm=norm, shading="flat")
+    cells = kind_of(model).energy_cells(model, q, v)
+    draw_patches(ax, Patches(cells.polygons, np.clip(cells.values / w0, norm.vmin, None)), cmap, norm)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xticks([])

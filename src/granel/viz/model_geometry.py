@@ -8,14 +8,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scenario.build import built_models
+from ..scenario.build import built_models, present_solid
+from ..solid.kinds import kind_of
 
 
 # ------------------------------------------------------------------ look-ups
 
 
 def _require_solid(sc) -> None:
-    if sc.solid is None or sc.solid.kind == "none":
+    if present_solid(sc) is None:
         raise ValueError(f"scenario {sc.name!r} has no solid ([solid] table or kind = none): Figs. 1-2 draw a granular-solid "
                          "interface; add a solid (kind = plate | beam | rigid)")
 
@@ -71,7 +72,7 @@ def rigid_layer(model, name: str) -> RigidLayer:
     that follow a unit translation u_x of the layer's driven (mid-node) DOF rigidly.
 
     Without rigid layers (mesh.rigid_layers = false) only the contact node moves: length 0."""
-    if model.kind != "plate":
+    if "rigid_layers" not in model.info:
         raise ValueError(f"rigid layers belong to the plate model, not to a {model.kind}")
     c = _contact(model, name)
     q = np.zeros(model.ndof)
@@ -83,20 +84,10 @@ def rigid_layer(model, name: str) -> RigidLayer:
     return RigidLayer(name, nodes, float(model.nodes[nodes[0], 0]), float(ys[0]), float(ys[-1]))
 
 
-def solid_box(sc, model) -> tuple[float, float, float, float]:
-    """(x0, y0, x1, y1) of the solid [m]: the plate's node extents, the beam's node line
-    widened by its depth, or the scenario's rectangle for the rigid solid."""
-    if model.kind == "plate":
-        (x0, y0), (x1, y1) = model.nodes.min(axis=0), model.nodes.max(axis=0)
-    elif model.kind == "beam":
-        xm = float(model.nodes[0, 0])
-        half = 0.5 * model.info["width"]
-        x0, x1 = xm - half, xm + half
-        y0, y1 = float(model.nodes[:, 1].min()), float(model.nodes[:, 1].max())
-    else:
-        s = sc.solid
-        x0, y0, x1, y1 = s.x0, s.y0, s.x0 + s.width, s.y0 + s.length
-    return float(x0), float(y0), float(x1), float(y1)
+def solid_box(model) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1) of the solid [m], as its kind gives it (`SolidKind.box`: a plate's node
+    extents, a beam's node line widened by its depth, a rigid solid's rectangle)."""
+    return kind_of(model).box(model)
 
 
 def central_contact(model, system, medium: str) -> str | None:

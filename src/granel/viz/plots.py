@@ -11,9 +11,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
-from ..scenario.build import built_models  # noqa: E402
+from ..scenario.build import built_models, present_solid  # noqa: E402
+from ..solid.kinds import is_elastic, kind_of  # noqa: E402
 
-Q8_OUTLINE = [0, 4, 1, 5, 2, 6, 3, 7]  # corner, mid-side, corner, ... around a Q8 element
 
 
 def save(fig, path: str | Path, dpi: int = 200) -> Path:
@@ -37,9 +37,10 @@ def plot_geometry(sc, output: str | Path, ax=None):
         ax.text(x, y, system.labels[g].split(":")[-1], ha="center", va="center", fontsize=7)
     for w in system.walls:
         ax.plot([w.p0[0], w.p1[0]], [w.p0[1], w.p1[1]], color="k", lw=2.5, solid_capstyle="butt")
-    if sc.solid is not None and sc.solid.kind != "none":
+    if present_solid(sc) is not None:
         s = sc.solid
-        ax.add_patch(Rectangle((s.x0, s.y0), s.width, s.length, fc="#BBBBBB", ec="k", lw=0.8, hatch="//" if s.kind == "rigid" else None))
+        ax.add_patch(Rectangle((s.x0, s.y0), s.width, s.length, fc="#BBBBBB", ec="k", lw=0.8,
+                               hatch=None if is_elastic(s.kind) else "//"))
         ax.plot([s.x0, s.x0 + s.width], [s.y0, s.y0], color="k", lw=3)
         ax.plot([s.x0, s.x0 + s.width], [s.y0 + s.length, s.y0 + s.length], color="k", lw=3)
         ax.set_title(f"{sc.name}: solid = {s.kind}")
@@ -60,21 +61,27 @@ def plot_geometry(sc, output: str | Path, ax=None):
     return ax
 
 
-def _element_outlines(model, disp=None, scale=0.0):
-    """Polygons (one per element) through the Q8 corner and mid-side nodes."""
-    xy = model.nodes + (scale * disp if disp is not None else 0.0)
-    return [xy[e[Q8_OUTLINE]] for e in model.elements]
-
-
-def draw_plate(ax, model, disp=None, scale=0.0, color="k", lw=0.3, field=None, cmap="viridis", vmin=None, vmax=None):
+def draw_shape(ax, shape, color="k", lw=0.3, marker=None, line_lw=1.2):
+    """A solid's `Shape` (`SolidKind.shape`): its cells outlined with width lw (a PolyCollection)
+    or its centre line with width line_lw (a Line2D, with `marker` at the nodes)."""
     from matplotlib.collections import PolyCollection
 
-    polys = _element_outlines(model, disp, scale)
-    pc = PolyCollection(polys, facecolors="none" if field is None else None, edgecolors=color, linewidths=lw)
-    if field is not None:
-        pc.set_array(np.asarray(field))
-        pc.set_cmap(cmap)
-        pc.set_clim(vmin, vmax)
+    if shape.polygons is not None:
+        artist = PolyCollection(shape.polygons, facecolors="none", edgecolors=color, linewidths=lw)
+        ax.add_collection(artist)
+        ax.autoscale_view()
+    else:
+        (artist,) = ax.plot(shape.line[:, 0], shape.line[:, 1], color=color, lw=line_lw, marker=marker, ms=3)
+    ax.set_aspect("equal")
+    return artist
+
+
+def draw_patches(ax, patches, cmap="viridis", norm=None):
+    """A solid's `Patches` (`SolidKind.energy_cells`) coloured by their values: a PolyCollection."""
+    from matplotlib.collections import PolyCollection
+
+    pc = PolyCollection(patches.polygons, cmap=cmap, norm=norm, edgecolors="none", linewidths=0)
+    pc.set_array(np.asarray(patches.values))
     ax.add_collection(pc)
     ax.autoscale_view()
     ax.set_aspect("equal")
@@ -85,22 +92,15 @@ def plot_modes(model, modes, kinds, which=(0, 3, 6), output="modes.png"):
     """Fig. 6: the undeformed mesh and the shapes of the selected modes with their periods."""
     n = len(which) + 1
     fig, axes = plt.subplots(1, n, figsize=(2.2 * n, 7.5), sharey=True)
-    if model.kind == "plate":
-        draw_plate(axes[0], model, lw=0.25)
-        axes[0].set_title(f"(a) mesh\n{model.info['elements']} elements, {model.ndof} DOFs", fontsize=9)
-    else:
-        axes[0].plot(model.nodes[:, 0], model.nodes[:, 1], "k.-", ms=3)
-        axes[0].set_title(f"(a) beam\n{model.info['elements']} elements, {model.ndof} DOFs", fontsize=9)
+    kind = kind_of(model)
+    draw_shape(axes[0], kind.shape(model), lw=0.25, marker=".")
+    axes[0].set_title(f"(a) {model.kind} mesh\n{model.info['elements']} elements, {model.ndof} DOFs", fontsize=9)
     width = np.ptp(model.nodes[:, 0]) or 0.01
     for ax, k, letter in zip(axes[1:], which, "bcdefgh"):
         d = model.full_displacement(modes.shapes[:, k])
         scale = 0.25 * width / np.abs(d).max()
-        if model.kind == "plate":
-            draw_plate(ax, model, lw=0.15, color="0.75")
-            draw_plate(ax, model, d, scale, color="C0", lw=0.3)
-        else:
-            ax.plot(model.nodes[:, 0], model.nodes[:, 1], color="0.75")
-            ax.plot(model.nodes[:, 0] + scale * d[:, 0], model.nodes[:, 1], "C0.-", ms=3)
+        draw_shape(ax, kind.shape(model), color="0.75", lw=0.15)
+        draw_shape(ax, kind.shape(model, d, scale), color="C0", lw=0.3, marker=".")
         ax.set_title(f"({letter}) mode {k + 1}: {kinds[k]}\nT = {modes.periods[k] * 1e3:.4g} ms", fontsize=9)
         ax.set_xlabel("x [m]")
         ax.set_aspect("equal")

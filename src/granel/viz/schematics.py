@@ -29,7 +29,7 @@ from .model_geometry import (_contact, _require_solid, _solid_model, _system, ce
 def _panel_planar(ax, sc, system, model, swapped, zoom_box):
     """Fig. 1(a) here (the paper's Fig. 1(b)): the planar model with boundary conditions."""
     panel = "a"
-    x0, y0, x1, y1 = solid_box(sc, model)
+    x0, y0, x1, y1 = solid_box(model)
     depth = draw_solid(ax, sc, model, panel)
     draw_walls(ax, system, panel, depth)
     draw_granules(ax, system, panel)
@@ -87,7 +87,7 @@ def _closeup_box(system, i, j, model, sc):
     ij = [i, j]
     lo = (system.pos0[ij] - system.radius[ij, None]).min(axis=0)
     hi = (system.pos0[ij] + system.radius[ij, None]).max(axis=0)
-    x0, _, x1, _ = solid_box(sc, model)
+    x0, _, x1, _ = solid_box(model)
     margin = 0.3 * system.radius[i]
     return (min(lo[0], x0) - margin, lo[1] - margin - 0.9 * system.radius[i],
             max(hi[0], x1) + margin, hi[1] + margin)
@@ -160,7 +160,7 @@ def _layer_inset(ax, sc, system, model, contact, layer, panel):
     ins = ax.inset_axes([0.03 if side < 0 else 0.55, 0.03, 0.42, 0.3])
     h = 1.4 * Lm
     ins.add_patch(Circle(system.pos0[g] * MM, R, fc=MEDIUM_COLOURS[system.medium_index[g] % 4], ec="k", lw=0.8))
-    x0, y0, x1, y1 = np.array(solid_box(sc, model)) * MM
+    x0, y0, x1, y1 = np.array(solid_box(model)) * MM
     ins.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="k", lw=0.8))
     ins.plot([c[0]] * 2, [layer.y_lo * MM, layer.y_hi * MM], color=LAYER_COLOUR, lw=4, solid_capstyle="butt")
     xd = c[0] + side * 0.45 * Lm
@@ -181,14 +181,14 @@ def figure1(sc):
     _require_solid(sc)
     system = _system(sc)
     model = _solid_model(sc, system, sc.solid.kind)
-    plate = model if model.kind == "plate" else _solid_model(sc, system, "plate")
+    plate = model if "rigid_layers" in model.info else _solid_model(sc, system, "plate")  # the close-up: a rigid layer
     swapped = swapped_shock(sc, system)
     fig = plt.figure(figsize=(13.0, 7.2))
     gs = fig.add_gridspec(1, 2, width_ratios=[1.45, 1.0], wspace=0.12)
     ax_a, ax_b = fig.add_subplot(gs[0]), fig.add_subplot(gs[1])
     contact = _closeup_contact(system)
     if contact is None:
-        box = solid_box(sc, model)
+        box = solid_box(model)
         _panel_planar(ax_a, sc, system, model, swapped, box)
         ax_b.set_axis_off()
         ax_b.text(0.5, 0.5, "no granule touches the solid", ha="center", transform=ax_b.transAxes)
@@ -223,7 +223,7 @@ def fig1_geometry(sc, out) -> list[Path]:
 def _panel_beam(ax, sc, system, beam):
     """Fig. 2(a): the beam's nodes on its neutral axis; the contact forces act at nodes."""
     panel = "a"
-    x0, y0, x1, y1 = np.array(solid_box(sc, beam)) * MM
+    x0, y0, x1, y1 = np.array(solid_box(beam)) * MM
     ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fc=SOLID_COLOUR, ec="0.5", lw=0.5))
     xy = beam.nodes * MM
     (ln,) = ax.plot(xy[:, 0], xy[:, 1], "-", color="k", lw=0.9)
@@ -258,7 +258,7 @@ def _panel_plate(ax, sc, system, plate):
     panel = "b"
     pc = PolyCollection(_element_polygons(plate), facecolors="none", edgecolors="k", linewidths=0.25)
     ax.add_collection(_tag(pc, panel, "elements"))
-    x0, y0, x1, y1 = np.array(solid_box(sc, plate)) * MM
+    x0, y0, x1, y1 = np.array(solid_box(plate)) * MM
     depth = 0.03 * (y1 - y0)
     for k, yy in ((0, y0), (1, y1)):
         if sc.solid.clamped[k]:
