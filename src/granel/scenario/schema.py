@@ -183,16 +183,34 @@ class PlateMeshSpec(_Strict):
 
 
 class SolidSpec(_Strict):
-    kind: Literal["plate", "beam", "rigid", "none"] = "plate"
+    kind: Literal["plate", "beam", "string", "rigid", "none"] = "plate"
     material: str = "steel"
     x0: float = 0.0
     y0: float = 0.0
     width: float = Field(0.01, ge=LENGTH_MIN, le=LENGTH_MAX)
     length: float = Field(0.1, ge=LENGTH_MIN, le=LENGTH_MAX)
     thickness: float = Field(0.001, ge=LENGTH_MIN, le=LENGTH_MAX)
-    beam_elements: int = Field(40, ge=2)
+    beam_elements: int = Field(40, ge=2, description="elements along a beam or a string")
     mesh: PlateMeshSpec = PlateMeshSpec()
-    clamped: tuple[bool, bool] = (True, True)
+    clamped: tuple[bool, bool] = Field((True, True), description="(bottom, top) ends held: a string's deflection "
+                                       "(and slope, if it bends) fixed there; a plate's or beam's end clamped")
+    tension: float = Field(0.0, ge=0.0, le=1e12, description="string: its tension [N] (> 0)")
+    foundation: float = Field(0.0, ge=0.0, le=1e18, description="string: an elastic foundation's stiffness per length "
+                              "[N/m^2] (0: none)")
+    bending_stiffness: bool = Field(False, description="string: add the cord's bending stiffness E I, I = thickness "
+                                    "width^3 / 12 (a tensioned beam)")
+
+    @model_validator(mode="after")
+    def _string(self):
+        if self.kind != "string":
+            return self
+        if not self.tension > 0:
+            raise ValueError("solid.tension: a string needs a tension > 0 [N] (a cord without tension and without "
+                             "bending stiffness carries no transverse load; for a beam, kind = \"beam\")")
+        if not any(self.clamped) and self.foundation == 0:
+            raise ValueError("solid.clamped: a string held at neither end, on no foundation, moves across as a rigid "
+                             "body; hold an end (clamped) or give it a foundation (solid.foundation)")
+        return self
 
 
 class MediumSpec(_Strict):

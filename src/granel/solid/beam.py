@@ -28,31 +28,35 @@ def build_beam(slab: Slab, material: Material, contacts, n_elements=40, clamped=
     consistent mass, the ends clamped where `clamped` says. contacts: list of (name, edge
     'left'/'right', y). Cross-section: depth = width (x), thickness (z); A = width * thickness,
     I = thickness * width^3 / 12 (Poisson's ratio unused)."""
-    x0, y0, width, length, thickness = slab.x0, slab.y0, slab.width, slab.length, slab.thickness
-    E, rho = material.E, material.rho
-    A = width * thickness
-    I = thickness * width**3 / 12.0
+    A = slab.width * slab.thickness
+    EI = material.E * slab.thickness * slab.width**3 / 12.0
+    fixed = tuple((0, 1) if c else () for c in clamped)
+    info = {"EI": EI, "rhoA": material.rho * A}
+    return hermite_line("beam", slab, material.rho * A, hermite_stiffness(EI, slab.length / n_elements), contacts,
+                        n_elements, fixed, info)
+
+
+def hermite_line(kind: str, slab: Slab, rhoA: float, ke: np.ndarray, contacts, n_elements: int, fixed, info: dict
+                 ) -> SolidModel:
+    """A line of `n_elements` equal Hermite cubic elements along y at the middle of `slab`'s width
+    (DOFs: deflection u_x and slope at each node), element stiffness `ke`, consistent mass of rho A
+    per length; `fixed` = (bottom, top): the local DOFs held at each end (0 deflection, 1 slope).
+    contacts: (name, edge 'left'/'right', y), each on a node whose deflection is free; they act
+    on the line's faces at x0 and x0 + width and have no y DOF (the line is rigid along its axis)."""
+    x0, y0, width, length = slab.x0, slab.y0, slab.width, slab.length
     l = length / n_elements
     nn = n_elements + 1
     ys = y0 + l * np.arange(nn)
-    ke = hermite_stiffness(E * I, l)
-    me = hermite_mass(rho * A, l)
-    rows, cols, kv, mv = [], [], [], []
-    for e in range(n_elements):
-        d = np.arange(2 * e, 2 * e + 4)
-        rows += list(np.repeat(d, 4))
-        cols += list(np.tile(d, 4))
-        kv += list(ke.ravel())
-        mv += list(me.ravel())
+    me = hermite_mass(rhoA, l)
+    d = 2 * np.arange(n_elements)[:, None] + np.arange(4)[None, :]  # (ne, 4) element DOFs
+    rows, cols = np.repeat(d, 4, axis=1).ravel(), np.tile(d, (1, 4)).ravel()
     N = 2 * nn
-    K = sp.csr_matrix((kv, (rows, cols)), shape=(N, N))
-    M = sp.csr_matrix((mv, (rows, cols)), shape=(N, N))
-    fixed = np.zeros(N, bool)
-    if clamped[0]:
-        fixed[[0, 1]] = True
-    if clamped[1]:
-        fixed[[N - 2, N - 1]] = True
-    keep = np.flatnonzero(~fixed)
+    K = sp.csr_matrix((np.tile(ke.ravel(), n_elements), (rows, cols)), shape=(N, N))
+    M = sp.csr_matrix((np.tile(me.ravel(), n_elements), (rows, cols)), shape=(N, N))
+    held = np.zeros(N, bool)
+    held[list(fixed[0])] = True
+    held[[N - 2 + k for k in fixed[1]]] = True
+    keep = np.flatnonzero(~held)
     red = -np.ones(N, dtype=np.int64)
     red[keep] = np.arange(len(keep))
     T = sp.csr_matrix((np.ones(len(keep)), (keep, np.arange(len(keep)))), shape=(N, len(keep)))
@@ -61,11 +65,11 @@ def build_beam(slab: Slab, material: Material, contacts, n_elements=40, clamped=
     cps = []
     for name, edge, y in contacts:
         node = int(round((y - y0) / l))
-        if abs(ys[node] - y) > 1e-9 * length:
-            raise ValueError(f"beam contact {name} at y = {y}: not on a node (element length {l:g} m); "
+        if not 0 <= node < nn or abs(ys[node] - y) > 1e-9 * length:
+            raise ValueError(f"{kind} contact {name} at y = {y}: not on a node (element length {l:g} m); "
                              "choose beam_elements so that every contact height is a node")
         if red[2 * node] < 0:
-            raise ValueError(f"beam contact {name} at y = {y}: on a clamped node")
+            raise ValueError(f"{kind} contact {name} at y = {y}: on a held end (solid.clamped)")
         xe = x0 if edge == "left" else x0 + width
         nrm = (1.0, 0.0) if edge == "left" else (-1.0, 0.0)
         cps.append(ContactPoint(name, (xe, y), nrm, int(red[2 * node]), -1, int(red[2 * node + 1])))
@@ -77,20 +81,15 @@ def build_beam(slab: Slab, material: Material, contacts, n_elements=40, clamped=
         return np.column_stack([x[0::2], np.zeros(nn)])
 
     def energies(q, v):
-        xq, xv = T @ q, T @ v
-        kin = np.empty(n_elements)
-        pot = np.empty(n_elements)
-        for e in range(n_elements):
-            d = slice(2 * e, 2 * e + 4)
-            kin[e] = 0.5 * xv[d] @ me @ xv[d]
-            pot[e] = 0.5 * xq[d] @ ke @ xq[d]
-        return kin, pot
+        xq, xv = (T @ q)[d], (T @ v)[d]  # (ne, 4)
+        return 0.5 * np.einsum("ei,ij,ej->e", xv, me, xv), 0.5 * np.einsum("ei,ij,ej->e", xq, ke, xq)
 
-    info = {"dofs": int(len(keep)), "elements": int(n_elements), "nodes": int(nn), "EI": E * I, "rhoA": rho * A,
-            "width": width, "thickness": thickness}
-    model = SolidModel("beam", Mr, Kr, cps, info, T, nodes, elems, energies, np.full(n_elements, A * l), full)
+    info = {"dofs": int(len(keep)), "elements": int(n_elements), "nodes": int(nn), "width": width,
+            "thickness": slab.thickness, "area": width * slab.thickness} | info
+    model = SolidModel(kind, Mr, Kr, cps, info, T, nodes, elems, energies, np.full(n_elements, width * slab.thickness * l),
+                       full)
     across = np.zeros(N)
-    across[0::2] = 1.0  # a unit translation across the beam (x); along its axis it is held rigidly
+    across[0::2] = 1.0  # a unit translation across the line (x); along its axis it is held rigidly
     model.unit_weight = np.column_stack([T.T @ (M @ across), np.zeros(len(keep))])
     return model
 

@@ -218,6 +218,14 @@ def lamb_branches(k, h: float, speeds: WaveSpeeds, count: int = 3) -> LambBranch
                         lamb_frequencies(k, h, speeds, "antisymmetric", count), float(h), speeds)
 
 
+def string_frequency(k, tension: float, rho_A: float, EI: float = 0.0, foundation: float = 0.0) -> np.ndarray:
+    """The transverse branch of a string under tension T (a tensioned beam if EI > 0) on a
+    foundation of stiffness k_f per length: rho A w^2 = T k^2 + EI k^4 + k_f, f = w / (2 pi) [Hz];
+    k_f cuts it on at f = sqrt(k_f / (rho A)) / (2 pi)."""
+    k = np.asarray(k, float)
+    return np.sqrt((tension * k**2 + EI * k**4 + foundation) / rho_A) / (2 * math.pi)
+
+
 def euler_bernoulli_frequency(k, EI: float, rho_A: float) -> np.ndarray:
     """The Euler-Bernoulli beam's flexural branch, eq. (9): f = k^2 sqrt(EI / (rho A)) / (2 pi) [Hz]."""
     return np.asarray(k, float) ** 2 * math.sqrt(EI / rho_A) / (2 * math.pi)

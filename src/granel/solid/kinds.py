@@ -7,8 +7,9 @@ from __future__ import annotations
 from .base import RigidKind, SolidKind, SolidModel
 from .beam import BEAM
 from .plate import PLATE
+from .string import STRING
 
-KINDS: dict[str, SolidKind] = {k.name: k for k in (PLATE, BEAM, RigidKind())}
+KINDS: dict[str, SolidKind] = {k.name: k for k in (PLATE, BEAM, STRING, RigidKind())}
 
 
 def kind_of(solid) -> SolidKind:

@@ -32,8 +32,9 @@ class RecipeContact:
 class SolidRecipe:
     """What a solid of `kind` (`solid.kinds`) is built from: the rectangle x0, y0, width, length
     and the out-of-plane thickness [m], Young's modulus E [Pa], Poisson's ratio nu, density rho
-    [kg/m^3], the contacts, the plate's mesh, the beam's element count and the clamped ends
-    (bottom, top). Fields a kind does not use keep their defaults."""
+    [kg/m^3], the contacts, the plate's mesh, the beam's or string's element count, the clamped
+    (held) ends (bottom, top), the string's tension [N], its foundation's stiffness per length
+    [N/m^2] and whether it bends. Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
@@ -48,6 +49,9 @@ class SolidRecipe:
     mesh: PlateMesh = field(default_factory=PlateMesh)
     beam_elements: int = 0
     clamped: tuple[bool, bool] = (True, True)
+    tension: float = 0.0
+    foundation: float = 0.0
+    bending: bool = True
 
     @property
     def slab(self) -> Slab:
@@ -72,7 +76,9 @@ class SolidRecipe:
                          bool(m["rigid_layers"]))
         clamped = tuple(bool(c) for c in d.pop("clamped"))
         kind, elements = str(d.pop("kind")), int(d.pop("beam_elements"))
-        return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, **{k: float(v) for k, v in d.items()})
+        bending = bool(d.pop("bending", True))
+        return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending,
+                   **{k: float(v) for k, v in d.items()})
 
 
 def build_solid_model(recipe: SolidRecipe) -> SolidModel:

@@ -57,8 +57,7 @@ class StringKind(BeamKind):
 
     def stress(self, model, x, E, nu):
         """The tension's stress T / A in every element, and the bending stress if it bends."""
-        out = {"tension_stress": np.full(model.nelements, model.info["tension"] / model.element_volume[0]
-                                         * (model.nodes[1, 1] - model.nodes[0, 1]))}
+        out = {"tension_stress": np.full(model.nelements, model.info["tension"] / model.info["area"])}
         return out | (super().stress(model, x, E, nu) if model.info["EI"] > 0 else {})
 
     def mode_kinds(self, model, shapes, which):

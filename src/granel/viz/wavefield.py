@@ -61,7 +61,7 @@ def fk_figure(wf: Wavefield, title: str = ""):
     fig, ax = plt.subplots(figsize=(8, 6), layout="constrained")
     _log_image(ax, fk.k[sel], fk.f[fs] / 1e3, fk.power[np.ix_(sel, fs)], "power [J s]")
     for name, f in curves.items():
-        ax.plot(b.k, f / 1e3, label=name, **BRANCH_STYLE[name[0]])
+        ax.plot(b.k, f / 1e3, label=name, **BRANCH_STYLE.get(name[0], BRANCH_STYLE["E"]))
     r = wf.ridges
     ax.plot(r.k, r.f / 1e3, "o", ms=3, mfc="none", mec="cyan", label="ridges")
     for k in (wf.k_window, wf.k_resolved):
