@@ -23,7 +23,7 @@ NUMBER_FIELDS = [
     "simulation.max_step", "contact.mu", "contact.alpha_n", "contact.k_s", "materials.steel.E", "materials.steel.rho",
     "materials.steel.nu", "solid.x0", "solid.y0", "solid.width", "solid.length", "solid.thickness", "solid.mesh.growth",
     "solid.mesh.max_size", "media.0.radius", "media.0.center_y", "media.0.gap", "excitations.0.fmax",
-    "excitations.0.tau", "excitations.0.t0",
+    "excitations.0.tau", "excitations.0.t0", "solid.tension", "solid.foundation",
 ]
 
 
@@ -43,14 +43,14 @@ def test_non_finite_numbers_are_refused_naming_the_field(field, value):
 
 
 @pytest.mark.parametrize("field", ["media.0.radius", "contact.mu", "solid.width", "excitations.0.fmax",
-                                   "materials.steel.E", "simulation.max_halvings", "media.0.columns"])
+                                   "materials.steel.E", "simulation.max_halvings", "media.0.columns", "solid.tension"])
 def test_a_boolean_is_not_a_number(field):
     value = "[true, 3]" if field == "media.0.columns" else "true"
     refused([f"{field}={value}"], field, "boolean")
 
 
 @pytest.mark.parametrize("field", ["simulation.adaptive", "media.0.outer_wall", "media.0.channel_walls",
-                                   "solid.mesh.rigid_layers"])
+                                   "solid.mesh.rigid_layers", "solid.bending_stiffness"])
 @pytest.mark.parametrize("value", ["1", "0", '"yes"'])
 def test_a_number_or_word_is_not_a_boolean(field, value):
     refused([f"{field}={value}"], field, "true or false")

@@ -201,15 +201,12 @@ class SolidSpec(_Strict):
                                     "width^3 / 12 (a tensioned beam)")
 
     @model_validator(mode="after")
-    def _string(self):
-        if self.kind != "string":
-            return self
-        if not self.tension > 0:
-            raise ValueError("solid.tension: a string needs a tension > 0 [N] (a cord without tension and without "
-                             "bending stiffness carries no transverse load; for a beam, kind = \"beam\")")
-        if not any(self.clamped) and self.foundation == 0:
-            raise ValueError("solid.clamped: a string held at neither end, on no foundation, moves across as a rigid "
-                             "body; hold an end (clamped) or give it a foundation (solid.foundation)")
+    def _kind(self):
+        """What the kind itself refuses (`SolidKind.check`: a string without tension, ...)."""
+        if self.kind != "none":
+            from ..solid.kinds import kind_of  # lazy: the solids' modules load scipy, which reading a file needs not
+
+            kind_of(self.kind).check(self)
         return self
 
 

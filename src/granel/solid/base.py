@@ -174,6 +174,9 @@ class SolidKind:
     elastic = True
     fields: frozenset[str] = frozenset({"kind", "x0", "y0", "width", "length"})
 
+    def check(self, section) -> None:
+        """Refuse a [solid] table this kind cannot be built from: ValueError naming the field."""
+
     def layer(self, section) -> float:
         """The length of the rigid layer at a contact, as a fraction of the granule's radius."""
         return 0.0

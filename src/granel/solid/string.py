@@ -46,6 +46,14 @@ class StringKind(BeamKind):
     name = "string"
     fields = BeamKind.fields | {"tension", "foundation", "bending_stiffness"}
 
+    def check(self, section) -> None:
+        if not section.tension > 0:
+            raise ValueError("solid.tension: a string needs a tension > 0 [N] (a cord without tension and without "
+                             "bending stiffness carries no transverse load; for a beam, kind = \"beam\")")
+        if not any(section.clamped) and section.foundation == 0:
+            raise ValueError("solid.clamped: a string held at neither end, on no foundation, moves across as a rigid "
+                             "body; hold an end (clamped) or give it a foundation (solid.foundation)")
+
     def recipe_fields(self, section, material) -> dict:
         return super().recipe_fields(section, material) | dict(
             tension=section.tension, foundation=section.foundation, bending=section.bending_stiffness)

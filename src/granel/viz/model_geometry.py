@@ -22,7 +22,7 @@ def _require_solid(sc) -> None:
 
 
 def with_solid_kind(sc, kind: str):
-    """A copy of the scenario whose solid is of `kind` ('plate', 'beam' or 'rigid')."""
+    """A copy of the scenario whose solid is of `kind` (a name of `solid.kinds.KINDS`)."""
     _require_solid(sc)
     return sc.model_copy(update={"solid": sc.solid.model_copy(update={"kind": kind})})
 
