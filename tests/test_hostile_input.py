@@ -43,7 +43,8 @@ def test_non_finite_numbers_are_refused_naming_the_field(field, value):
 
 
 @pytest.mark.parametrize("field", ["media.0.radius", "contact.mu", "solid.width", "excitations.0.fmax",
-                                   "materials.steel.E", "simulation.max_halvings", "media.0.columns", "solid.tension"])
+                                   "materials.steel.E", "simulation.max_halvings", "media.0.columns", "solid.tension",
+                                   "solid.surface_elements"])
 def test_a_boolean_is_not_a_number(field):
     value = "[true, 3]" if field == "media.0.columns" else "true"
     refused([f"{field}={value}"], field, "boolean")

@@ -101,7 +101,7 @@ def _report_failures(failed, n: int, where: str) -> None:
 @app.command()
 def run(
     scenario: str = typer.Argument(..., help="built-in name (see `granel scenarios`), a TOML file, or - (standard input)"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | string | rigid | none (a string needs solid.tension)"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | string | bending_plate | membrane | rigid | none (a string or membrane needs solid.tension)"),
     excite: Optional[str] = typer.Option(None, help="granule label of the first excitation, e.g. LSGM:3 or SSGM:C"),
     shock: Optional[str] = typer.Option(None, help="weak | moderate | strong (the paper's half-sine levels) or a peak force in N"),
     duration: Optional[str] = typer.Option(None, help="simulated time, e.g. 0.8ms"),
@@ -154,7 +154,7 @@ def scenarios():
 def show(
     scenario: str = typer.Argument(..., help="built-in name, TOML file, or - (standard input)"),
     output: Path = typer.Option(Path("geometry.png"), "-o", "--output", readable=False, help="PNG or PDF"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | string | rigid | none (a string needs solid.tension)"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | string | bending_plate | membrane | rigid | none (a string or membrane needs solid.tension)"),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="override any field: key.path=value (key=- removes it)"),
     resolved: bool = typer.Option(False, "--resolved", help="print the fully resolved scenario (every default) as TOML "
                                                             "instead of drawing"),
@@ -187,7 +187,7 @@ def init(
 @app.command()
 def modes(
     scenario: str = typer.Argument("paper", help="built-in name, TOML file, or - (standard input)"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | string"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | string | bending_plate | membrane"),
     count: int = typer.Option(12, help="modes to print"),
     json_out: bool = typer.Option(False, "--json", help="print JSON on stdout"),
     plot: Optional[Path] = typer.Option(None, readable=False, help="write the Fig. 6 picture (mesh and modes 1, 4, 7)"),
@@ -244,7 +244,7 @@ def reciprocity(
     scenario: str = typer.Argument("paper", help="built-in name, TOML file, or - (standard input)"),
     shock: Optional[str] = typer.Option(None, help="weak | moderate | strong, or a peak force in N "
                                         "(default: the scenario's own; the paper's is strong)"),
-    solid: Optional[str] = typer.Option(None, help="plate | beam | string | rigid"),
+    solid: Optional[str] = typer.Option(None, help="plate | beam | string | bending_plate | membrane | rigid"),
     a: str = typer.Option("LSGM:3", "--a", help="first excitation/measurement granule"),
     b: str = typer.Option("SSGM:C", "--b", help="second excitation/measurement granule"),
     duration: Optional[str] = typer.Option(None, help="simulated time, e.g. 0.8ms"),

@@ -182,8 +182,11 @@ class PlateMeshSpec(_Strict):
     rigid_layers: bool = True
 
 
+Edge = Literal["clamped", "simple", "fixed", "free"]
+
+
 class SolidSpec(_Strict):
-    kind: Literal["plate", "beam", "string", "rigid", "none"] = "plate"
+    kind: Literal["plate", "beam", "string", "bending_plate", "membrane", "rigid", "none"] = "plate"
     material: str = "steel"
     x0: float = 0.0
     y0: float = 0.0
@@ -194,11 +197,18 @@ class SolidSpec(_Strict):
     mesh: PlateMeshSpec = PlateMeshSpec()
     clamped: tuple[bool, bool] = Field((True, True), description="(bottom, top) ends held: a string's deflection "
                                        "(and slope, if it bends) fixed there; a plate's or beam's end clamped")
-    tension: float = Field(0.0, ge=0.0, le=1e12, description="string: its tension [N] (> 0)")
+    tension: float = Field(0.0, ge=0.0, le=1e12, description="string: its tension [N]; membrane: its tension per "
+                           "length [N/m] (> 0)")
     foundation: float = Field(0.0, ge=0.0, le=1e18, description="string: an elastic foundation's stiffness per length "
-                              "[N/m^2] (0: none)")
+                              "[N/m^2]; membrane: per area [N/m^3] (0: none)")
     bending_stiffness: bool = Field(False, description="string: add the cord's bending stiffness E I, I = thickness "
                                     "width^3 / 12 (a tensioned beam)")
+    edges: tuple[Edge, Edge, Edge, Edge] | None = Field(
+        None, description="bending_plate, membrane: its edges (bottom y0, top y0 + length, front z = -thickness/2, "
+        "back z = +thickness/2): a plate's each clamped, simple (supported) or free (default clamped), a membrane's "
+        "fixed or free (default fixed)")
+    surface_elements: int = Field(24, ge=2, le=400, description="bending_plate: elements along its length (and as "
+                                  "many of the same size across its depth)")
 
     @model_validator(mode="after")
     def _kind(self):

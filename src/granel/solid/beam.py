@@ -187,6 +187,10 @@ class BeamKind(SolidKind):
     def mode_kinds(self, model, shapes, which):
         return ["bending" for _ in which]
 
+    def deflection_dofs(self, model) -> np.ndarray:
+        """The full DOF of each drawn node's deflection (the Hermite line's: every other one)."""
+        return 2 * np.arange(len(model.nodes))
+
     def wave_lines(self, model, samples=None) -> LineSampling:
         """Its one line of nodes: every node that is not clamped, the deflection sampled."""
         r = model.recipe
@@ -195,11 +199,11 @@ class BeamKind(SolidKind):
         ne = len(model.nodes) - 1
         clamped = tuple(bool(c) for c in r.clamped)
         count = {(True, True): ne - 1, (False, False): ne + 1}.get(clamped, ne)
-        full = model.T.shape[0]
+        full, dofs = model.T.shape[0], self.deflection_dofs(model)
 
         def sampler(y):
             at = np.rint((np.asarray(y) - r.y0) / (r.length / ne)).astype(int)
-            return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), 2 * at)), shape=(len(at), full))
+            return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), dofs[at])), shape=(len(at), full))
 
         return LineSampling(np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",), count,
                             float(r.length / ne), sampler)

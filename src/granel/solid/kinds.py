@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from .base import RigidKind, SolidKind, SolidModel
 from .beam import BEAM
+from .bending_plate import BENDING_PLATE
+from .membrane import MEMBRANE
 from .plate import PLATE
 from .string import STRING
 
-KINDS: dict[str, SolidKind] = {k.name: k for k in (PLATE, BEAM, STRING, RigidKind())}
+KINDS: dict[str, SolidKind] = {k.name: k for k in (PLATE, BEAM, STRING, BENDING_PLATE, MEMBRANE, RigidKind())}
 
 
 def kind_of(solid) -> SolidKind:

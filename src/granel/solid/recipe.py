@@ -34,7 +34,8 @@ class SolidRecipe:
     and the out-of-plane thickness [m], Young's modulus E [Pa], Poisson's ratio nu, density rho
     [kg/m^3], the contacts, the plate's mesh, the beam's or string's element count, the clamped
     (held) ends (bottom, top), the string's tension [N], its foundation's stiffness per length
-    [N/m^2] and whether it bends. Fields a kind does not use keep their defaults."""
+    [N/m^2] and whether it bends, and a bending plate's edges (bottom, top, front, back: clamped,
+    simple or free). Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
@@ -52,6 +53,7 @@ class SolidRecipe:
     tension: float = 0.0
     foundation: float = 0.0
     bending: bool = True
+    edges: tuple[str, ...] = ()
 
     @property
     def slab(self) -> Slab:
@@ -77,7 +79,8 @@ class SolidRecipe:
         clamped = tuple(bool(c) for c in d.pop("clamped"))
         kind, elements = str(d.pop("kind")), int(d.pop("beam_elements"))
         bending = bool(d.pop("bending", True))
-        return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending,
+        edges = tuple(str(e) for e in d.pop("edges", ()))
+        return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending, edges=edges,
                    **{k: float(v) for k, v in d.items()})
 
 

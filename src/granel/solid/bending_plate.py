@@ -1,0 +1,264 @@
+"""A thin (Kirchhoff) plate standing across the granular plane: its mid-surface is the plane
+x = x0 + h/2 spanning y (the granular plane's `length`) and z (out of it, the `thickness` field),
+h = `width` its own thickness; granules touch its faces x0, x0 + h on the line z = 0 and it bends
+along x: rho h w_tt + D lap^2 w = p, D = E h^3 / 12 (1 - nu^2). Morley elements (scikit-fem's
+ElementTriMorley: vertex values and edge normal slopes, P2, non-conforming); docs/solids.md
+("Plate in bending")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .base import ContactPoint, Material, Slab, SolidModel
+from .beam import BeamKind
+from .dispersion import euler_bernoulli_frequency
+
+EDGES = ("bottom", "top", "front", "back")  # y = y0, y = y0 + length, z = -depth/2, z = +depth/2
+EDGE_KINDS = ("clamped", "simple", "free")
+
+
+def flexural_rigidity(E: float, nu: float, h: float) -> float:
+    """D = E h^3 / 12 (1 - nu^2), the Kirchhoff plate's bending stiffness [N m]."""
+    return E * h**3 / (12.0 * (1.0 - nu * nu))
+
+
+def kirchhoff_forms(D: float, nu: float, rho_h: float):
+    """(stiffness, mass, strain energy density, kinetic energy density) of the Kirchhoff plate:
+    a(w, v) = int D ((1 - nu) w_,ij v_,ij + nu lap w lap v), m(w, v) = int rho h w v."""
+    from skfem import BilinearForm, Functional
+    from skfem.helpers import dd, ddot, eye, trace
+
+    def moments(T):
+        return D * ((1.0 - nu) * T + nu * eye(trace(T), 2))
+
+    @BilinearForm
+    def stiffness(u, v, _):
+        return ddot(moments(dd(u)), dd(v))
+
+    @BilinearForm
+    def mass(u, v, _):
+        return rho_h * u * v
+
+    @Functional
+    def strain(w):
+        return 0.5 * ddot(moments(dd(w["u"])), dd(w["u"]))
+
+    @Functional
+    def kinetic(w):
+        return 0.5 * rho_h * w["speed"] ** 2
+
+    return stiffness, mass, strain, kinetic
+
+
+def _axis(lo: float, length: float, n: int) -> np.ndarray:
+    return lo + length * np.arange(n + 1) / n
+
+
+@dataclass
+class Surface:
+    """A surface standing across the granular plane, meshed: its mesh (coordinates y, z), the
+    scikit-fem basis of its element, the facets of each edge (bottom, top, front, back)."""
+
+    slab: Slab
+    mesh: object
+    basis: object
+    edge_facets: dict
+    n_along: int
+
+
+def standing_surface(slab: Slab, element, n_along: int) -> Surface:
+    """The uniform grid of `slab`'s surface (y over its length, z over its thickness centred on
+    the granular plane) of n_along cells along y and as many of the same size along z (an even
+    count: z = 0 is a grid line), two triangles a cell, with `element`'s basis."""
+    from skfem import Basis, MeshTri
+
+    y0, L, depth = slab.y0, slab.length, slab.thickness
+    nz = max(2, 2 * int(round(0.5 * n_along * depth / L)))
+    mesh = MeshTri.init_tensor(_axis(y0, L, n_along), _axis(-depth / 2, depth, nz))
+    tol = 1e-9 * max(L, depth)
+    where = {"bottom": lambda p: np.abs(p[0] - y0) < tol, "top": lambda p: np.abs(p[0] - y0 - L) < tol,
+             "front": lambda p: np.abs(p[1] + depth / 2) < tol, "back": lambda p: np.abs(p[1] - depth / 2) < tol}
+    return Surface(slab, mesh, Basis(mesh, element, intorder=4), {e: mesh.facets_satisfying(where[e]) for e in EDGES},
+                   n_along)
+
+
+def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translation: np.ndarray, contacts, strain,
+                  kinetic, info: dict) -> SolidModel:
+    """The solid of a standing surface with stiffness K, mass M (full DOFs) and the DOFs `fixed`
+    held: reduced by T, its contacts on the vertices of its line z = 0 (the vertex value DOF, no
+    y DOF), that line drawn in the granular plane at x0 + h/2 (its segments are the model's
+    elements; each triangle's energies go to the segment its centroid's y falls in), its weight
+    across it (M times `translation`, the full DOFs of w = 1 everywhere). ValueError for a contact
+    off a vertex of z = 0 or on a held one."""
+    slab, mesh, basis = surface.slab, surface.mesh, surface.basis
+    h, L, p = slab.width, slab.length, mesh.p
+    u_dofs = basis.nodal_dofs[0]
+    keep = np.flatnonzero(~fixed)
+    red = -np.ones(basis.N, dtype=np.int64)
+    red[keep] = np.arange(len(keep))
+    T = sp.csr_matrix((np.ones(len(keep)), (keep, np.arange(len(keep)))), shape=(basis.N, len(keep)))
+    on_line = np.flatnonzero(np.abs(p[1]) < 1e-9 * max(L, slab.thickness))
+    on_line = on_line[np.argsort(p[0, on_line])]
+    line_y = p[0, on_line]
+    cps = []
+    for name, edge, y in contacts:
+        i = int(np.argmin(np.abs(line_y - y)))
+        if abs(line_y[i] - y) > 1e-9 * L:
+            raise ValueError(f"{kind} contact {name} at y = {y}: not on a node of z = 0 (element length "
+                             f"{L / surface.n_along:g} m); choose surface_elements so that every contact height is a node")
+        dof = int(red[u_dofs[on_line[i]]])
+        if dof < 0:
+            raise ValueError(f"{kind} contact {name} at y = {y}: on a held edge (solid.edges)")
+        xe = slab.x0 if edge == "left" else slab.x0 + h
+        cps.append(ContactPoint(name, (xe, y), (1.0, 0.0) if edge == "left" else (-1.0, 0.0), dof, -1, -1))
+    nodes = np.column_stack([np.full(len(on_line), slab.x0 + h / 2), line_y])
+    segments = np.column_stack([np.arange(len(on_line) - 1), np.arange(1, len(on_line))])
+    segment_of = np.clip(np.searchsorted(line_y, p[0, mesh.t].mean(axis=0)) - 1, 0, len(segments) - 1)
+
+    def full(q):
+        w = T @ q
+        return np.column_stack([w[u_dofs[on_line]], np.zeros(len(on_line))])
+
+    def energies(q, v):
+        kin = kinetic.elemental(basis, speed=basis.interpolate(T @ v))
+        pot = strain.elemental(basis, u=basis.interpolate(T @ q))
+        return np.bincount(segment_of, kin, len(segments)), np.bincount(segment_of, pot, len(segments))
+
+    info = {"dofs": int(len(keep)), "elements": int(mesh.t.shape[1]), "nodes": int(p.shape[1]), "width": h,
+            "depth": slab.thickness, "full_dofs": int(basis.N), "along": int(surface.n_along)} | info
+    model = SolidModel(kind, (T.T @ M @ T).tocsr(), (T.T @ K @ T).tocsr(), cps, info, T, nodes, segments, energies,
+                       h * slab.thickness * np.diff(line_y), full)
+    model.basis = basis
+    model.line_dofs = u_dofs[on_line]
+    model.unit_weight = np.column_stack([T.T @ (M @ translation), np.zeros(len(keep))])
+    return model
+
+
+def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4
+                        ) -> SolidModel:
+    """The Kirchhoff plate of `slab` (h = width, along x; the length along y; its depth along z =
+    thickness, centred on the granular plane) on `standing_surface`'s grid of Morley triangles.
+    edges: (bottom, top, front, back) each 'clamped' (w and its normal slope held), 'simple' (w
+    held) or 'free'. contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0.
+    ValueError for edges that leave it free to move as a rigid body, or a contact off a vertex or
+    on a held edge."""
+    from skfem import ElementTriMorley
+
+    surface = standing_surface(slab, ElementTriMorley(), n_along)
+    mesh, basis = surface.mesh, surface.basis
+    D, rho_h = flexural_rigidity(material.E, material.nu, slab.width), material.rho * slab.width
+    stiffness, mass, strain, kinetic = kirchhoff_forms(D, material.nu, rho_h)
+    K, M = stiffness.assemble(basis).tocsr(), mass.assemble(basis).tocsr()
+    fixed = np.zeros(basis.N, bool)
+    for side, how in zip(EDGES, edges):
+        dofs = basis.get_dofs(surface.edge_facets[side])
+        if how == "clamped":
+            fixed[dofs.all()] = True
+        elif how == "simple":
+            fixed[dofs.nodal["u"]] = True
+    # the rigid motions w = a + b y + c z (exact in Morley: vertex values, edge normal slopes)
+    u_dofs, p = basis.nodal_dofs[0], mesh.p
+    rigid = np.zeros((basis.N, 3))
+    rigid[u_dofs, 0], rigid[u_dofs, 1], rigid[u_dofs, 2] = 1.0, p[0] - slab.y0, p[1]
+    slopes = _facet_normals(mesh)
+    rigid[basis.facet_dofs[0], 1], rigid[basis.facet_dofs[0], 2] = slopes[0], slopes[1]
+    if np.linalg.matrix_rank(rigid[fixed], tol=1e-9) < 3:
+        raise ValueError(f"solid.edges = {list(edges)}: the plate is free to move as a rigid body (it needs an edge "
+                         "clamped, or three of its corners' lines held: two opposite edges simply supported, or "
+                         "one clamped)")
+    return surface_model("bending_plate", surface, K, M, fixed, rigid[:, 0], contacts, strain, kinetic,
+                         {"D": D, "rhoh": rho_h, "thickness": slab.width})
+
+
+def _facet_normals(mesh) -> np.ndarray:
+    """(2, n_facets) a unit normal of each facet of a triangle mesh, in skfem's orientation for
+    ElementTriMorley's normal-slope DOF (the facet's tangent turned by -90 degrees)."""
+    a, b = mesh.p[:, mesh.facets[0]], mesh.p[:, mesh.facets[1]]
+    t = (b - a) / np.linalg.norm(b - a, axis=0)
+    return np.vstack([t[1], -t[0]])
+
+
+class BendingPlateKind(BeamKind):
+    """The Kirchhoff plate standing across the granular plane (`build_bending_plate`), seen edge-on:
+    drawn, exported and sampled along its line z = 0 as a beam is along its axis."""
+
+    name = "bending_plate"
+    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements"}
+
+    edge_kinds = ("clamped", "simple", "free")  # the first is the default
+
+    def edges(self, section) -> tuple[str, ...]:
+        """Its four edges as the [solid] table gives them, or the default for each."""
+        return tuple(section.edges) if section.edges is not None else (self.edge_kinds[0],) * 4
+
+    def check(self, section) -> None:
+        edges = self.edges(section)
+        if any(e not in self.edge_kinds for e in edges):
+            raise ValueError(f"solid.edges = {list(edges)}: a {self.name}'s edges are each one of "
+                             f"{', '.join(self.edge_kinds)}")
+        if all(e == "free" for e in edges) and not getattr(section, "foundation", 0):
+            raise ValueError(f"solid.edges: a {self.name} with every edge free moves as a rigid body; hold an edge")
+
+    def recipe_fields(self, section, material) -> dict:
+        edges = self.edges(section)
+        return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length,
+                    thickness=section.thickness, E=material.E, rho=material.rho, nu=material.nu,
+                    beam_elements=section.surface_elements, edges=edges,
+                    clamped=(edges[0] != "free", edges[1] != "free"))
+
+    def build(self, recipe) -> SolidModel:
+        r = recipe
+        return build_bending_plate(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
+                                   r.beam_elements, r.edges)
+
+    def size(self, section) -> tuple[int, int]:
+        """Morley: a DOF per vertex and per edge of the (n_along x n_across) grid of two triangles a
+        cell; its elements as drawn and exported: the segments of its line z = 0."""
+        ny = section.surface_elements
+        nz = max(2, 2 * int(round(0.5 * ny * section.thickness / section.length)))
+        vertices, cells = (ny + 1) * (nz + 1), ny * nz
+        return vertices + (ny * (nz + 1) + nz * (ny + 1) + cells), ny
+
+    def export_cells(self, model):
+        return [("line", np.asarray(model.elements, dtype=np.int64))]
+
+    def stress(self, model, x, E, nu):
+        """The largest surface bending stress (von Mises of 6 M / h^2) over the triangles of each
+        segment of the line z = 0."""
+        from skfem import Functional
+        from skfem.helpers import dd
+
+        h = model.info["width"]
+
+        @Functional
+        def surface_von_mises(w):
+            k = dd(w["u"])
+            c = E * h / (2 * (1 - nu * nu))
+            sy, sz, syz = c * (k[0, 0] + nu * k[1, 1]), c * (k[1, 1] + nu * k[0, 0]), c * (1 - nu) * k[0, 1]
+            return np.sqrt(sy**2 - sy * sz + sz**2 + 3 * syz**2)
+
+        basis = model.basis
+        per_triangle = surface_von_mises.elemental(basis, u=basis.interpolate(np.asarray(x, float))) / basis.dx.sum(1)
+        line_y = model.nodes[:, 1]
+        centroid_y = basis.mesh.p[0, basis.mesh.t].mean(axis=0)
+        segment = np.clip(np.searchsorted(line_y, centroid_y) - 1, 0, len(model.elements) - 1)
+        out = np.zeros(len(model.elements))
+        np.maximum.at(out, segment, per_triangle)
+        return {"surface_von_mises": out}
+
+    def mode_kinds(self, model, shapes, which):
+        return ["transverse" for _ in which]
+
+    def deflection_dofs(self, model) -> np.ndarray:
+        """The Morley vertex value of each vertex of its line z = 0 (its wavefield samples them)."""
+        return np.asarray(model.line_dofs)
+
+    def branches(self, model, k, count=3):
+        """The Kirchhoff plate's flexural branch f = k^2 sqrt(D / rho h) / 2 pi (plane waves along y)."""
+        return {"flexural": euler_bernoulli_frequency(k, model.info["D"], model.info["rhoh"])}
+
+
+BENDING_PLATE = BendingPlateKind()

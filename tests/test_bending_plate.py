@@ -1,0 +1,121 @@
+"""The Kirchhoff plate standing across the granular plane (`solid.bending_plate`, Morley elements)
+against references no one here wrote: the simply supported rectangle's exact frequencies
+w = pi^2 (m^2 / a^2 + n^2 / b^2) sqrt(D / rho h) with the element's observed convergence order
+(2 for Morley), the clamped square's tabulated ones (Leissa, NASA SP-160, 1969: lambda = w a^2
+sqrt(rho h / D) = 35.99, 73.41), and its refusals of edges that hold nothing."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.sparse.linalg import eigsh
+
+from granel import scenario as S
+from granel.run import run_scenario
+from granel.scenario.schema import ScenarioError
+from granel.solid.base import Material, Slab
+from granel.solid.bending_plate import build_bending_plate, flexural_rigidity
+
+from test_exact import ledger_bound
+
+STEEL = Material(200e9, 7850.0, 0.3)
+H = 1e-3
+D = flexural_rigidity(STEEL.E, STEEL.nu, H)
+SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "bending" / "chain-on-plate.toml"
+
+
+def lambdas(a, b, n, edges, count=4):
+    """The lowest `count` of w a^2 sqrt(rho h / D) of an a (along y) x b (along z) plate on n
+    elements along a, by shift-invert Lanczos."""
+    model = build_bending_plate(Slab(0.0, 0.0, H, a, b), STEEL, [], n, edges)
+    w2 = np.sort(eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")[0])
+    return np.sqrt(w2) * a * a * math.sqrt(STEEL.rho * H / D)
+
+
+def test_the_simply_supported_rectangle_converges_to_its_exact_frequencies_at_order_two():
+    """A 2:1 rectangle (a = 0.1, b = 0.05 m), every edge simply supported: exact lambda_mn =
+    pi^2 (m^2 + n^2 a^2 / b^2). Morley's eigenvalue error is O(h^2): the observed order of each of
+    the four lowest rises toward 2 as the mesh is refined (16 -> 32 -> 64 elements: 1.79-1.93,
+    then 1.94-1.98 measured), and the error at 64 is below the change from 32 (an order-2 error is
+    a third of that change)."""
+    a, b = 0.1, 0.05
+    exact = np.sort([math.pi**2 * (m * m + n * n * (a / b) ** 2) for m in range(1, 5) for n in range(1, 4)])[:4]
+    values = {n: lambdas(a, b, n, ("simple",) * 4) for n in (16, 32, 64)}
+    error = {n: np.abs(v - exact) for n, v in values.items()}
+    early, late = (np.log(error[n] / error[2 * n]) / math.log(2) for n in (16, 32))
+    assert np.all((early < late) & (1.9 <= late) & (late <= 2.1)), (early, late)
+    assert np.all(error[64] < np.abs(values[64] - values[32]))
+
+
+def test_the_clamped_square_meets_leissas_table():
+    """A clamped square: Leissa's lambda_1 = 35.99, lambda_2 = 73.41. Richardson's extrapolation of
+    the order-2 Morley values from 16 and 32 elements, within its own last change (the
+    extrapolation from 8 and 16 against it) plus half the table's last digit."""
+    values = {n: lambdas(0.1, 0.1, n, ("clamped",) * 4, 3) for n in (8, 16, 32)}
+    early = (4 * values[16] - values[8]) / 3
+    late = (4 * values[32] - values[16]) / 3
+    table = np.array([35.99, 73.41])
+    got = late[[0, 1]]
+    assert np.all(np.abs(got - table) <= np.abs(late - early)[[0, 1]] + 5e-3)
+    assert np.all(values[32][[0, 1]] < table)  # Morley's clamped plate is too soft here: it converges from below
+
+
+@pytest.mark.parametrize("edges", [("simple", "free", "free", "free"), ("free", "free", "free", "free")])
+def test_edges_that_hold_nothing_are_refused_naming_the_field(edges):
+    """One supported edge leaves the plate free to turn about it; none leaves it free to move."""
+    with pytest.raises((ScenarioError, ValueError), match="solid.edges"):
+        sc = S.load(str(SCENARIO), [f"solid.edges={list(edges)!r}".replace("'", '"'), "solid.surface_elements=6"])
+        system, _, _ = S.build_granular(sc)
+        S.build_solid(sc, system)
+
+
+def test_two_opposite_supported_edges_hold_it_as_leissa_tabulates():
+    """A square simply supported on two opposite edges, free on the others (nu = 0.3): Leissa's
+    lambda_1 = 9.631, lambda_2 = 16.135, against the Richardson extrapolation of 32 and 64 elements
+    within its last change (from 16 and 32) plus half the table's last digit."""
+    edges = ("simple", "simple", "free", "free")
+    values = {n: lambdas(0.1, 0.1, n, edges, 2) for n in (16, 32, 64)}
+    early, late = ((4 * values[2 * n] - values[n]) / 3 for n in (16, 32))
+    assert np.all(np.abs(late - np.array([9.631, 16.135])) <= np.abs(late - early) + 5e-4)
+
+
+def test_a_chain_on_the_plate_keeps_the_ledger():
+    """The transducer scenario on a coarse plate (10 elements along), through the exact integrator:
+    the pulse reaches the plate and the ledger (13) closes within the integrator's bound."""
+    sc = S.load(str(SCENARIO), ["solid.surface_elements=10", 'simulation.duration="0.4ms"'])
+    ds = run_scenario(sc)
+    assert ds["energy_solid"].values.max() > 0.01 * ds["input_work"].values[-1]
+    assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)
+
+
+def navier_centre_deflection(a, b, q, terms=199):
+    """Navier's double sine series for the simply supported rectangle under a uniform load q: the
+    deflection at its centre, 16 q / (pi^6 D) sum over odd m, n of
+    sin(m pi/2) sin(n pi/2) / (m n (m^2/a^2 + n^2/b^2)^2)."""
+    m = np.arange(1, terms + 1, 2)[:, None]
+    n = np.arange(1, terms + 1, 2)[None, :]
+    s = np.sin(m * math.pi / 2) * np.sin(n * math.pi / 2) / (m * n * (m**2 / a**2 + n**2 / b**2) ** 2)
+    return 16 * q / (math.pi**6 * D) * s.sum()
+
+
+@pytest.mark.parametrize("edges, reference", [
+    (("simple",) * 4, None),  # Navier's series
+    (("clamped",) * 4, 0.00126532),  # Evans (1939): w = 0.00126532 q a^4 / D (Timoshenko's table: 0.00126)
+])
+def test_a_square_plate_sags_under_its_weight_as_plate_theory_says(edges, reference):
+    """Gravity across the plate (along x) loads it with q = rho h g; the sag at its centre, where a
+    granule touches it, against Navier's series (simply supported) or the clamped square's
+    coefficient: Richardson's extrapolation (order 2) from 32 and 64 elements within its own last
+    change (from 16 and 32), plus half the coefficient's last digit."""
+    a, g = 0.1, 9.81
+    q = STEEL.rho * H * g
+    want = navier_centre_deflection(a, a, q) if reference is None else reference * q * a**4 / D
+    sag = {n: build_bending_plate(Slab(0.0, 0.0, H, a, a), STEEL, [("c", "left", a / 2)], n, edges).sag((g, 0.0))[0, 0]
+           for n in (16, 32, 64)}
+    early, late = ((4 * sag[2 * n] - sag[n]) / 3 for n in (16, 32))
+    slack = 0.0 if reference is None else 0.5e-8 * q * a**4 / D
+    assert abs(late - want) <= abs(late - early) + slack
+    assert sag[16] > sag[32] > sag[64] > 0  # Morley's plate is too soft, less so as it is refined
