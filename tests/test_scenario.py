@@ -69,7 +69,7 @@ def test_paper_scenario_geometry(paper_raw):
         ('simulation.duration="fast"', "simulation.duration"),
         ("media.0.gap=-0.001", "media.0.gap"),
         ('excitations.0.shock="huge"', "excitations.0.shock"),
-        ('solid.kind="membrane"', "solid.kind"),
+        ('solid.kind="shell"', "solid.kind"),
         ('media.0.material="wood"', "media.0.material"),
         ("solid.width=0", "solid.width"),
     ],
