@@ -119,3 +119,55 @@ def test_a_square_plate_sags_under_its_weight_as_plate_theory_says(edges, refere
     slack = 0.0 if reference is None else 0.5e-8 * q * a**4 / D
     assert abs(late - want) <= abs(late - early) + slack
     assert sag[16] > sag[32] > sag[64] > 0  # Morley's plate is too soft, less so as it is refined
+
+
+def disc_lambdas(radius, n, count=7):
+    """The lowest `count` of w a^2 sqrt(rho h / D) (a the radius) of a clamped disc on n elements
+    along its diameter (n / 2 rings of `bending_plate.disc_mesh`)."""
+    model = build_bending_plate(Slab(0.0, 0.0, H, 2 * radius, 2 * radius), STEEL, [], n, ("clamped",), "disc")
+    w2 = np.sort(eigsh(model.K.tocsc(), count, model.M.tocsc(), sigma=0.0, which="LM")[0])
+    return np.sqrt(w2) * radius**2 * math.sqrt(STEEL.rho * H / D)
+
+
+def test_the_clamped_disc_meets_leissas_table_at_order_two():
+    """A clamped circular plate: Leissa's lambda = w a^2 sqrt(rho h / D) = 10.2158 (axisymmetric),
+    21.26 (one nodal diameter, a pair), 34.88 (two, a pair), 39.77 (axisymmetric, one nodal
+    circle). Morley's error is O(h^2), and so is the inscribed polygon's (its area falls short by
+    O(h^2)): the observed order of each rises toward 2 (16 -> 32 -> 64 elements along the
+    diameter: 1.79-1.93, then 1.93-1.98 measured), and Richardson's extrapolation from 32 and 64
+    meets the table within its own last change (from 16 and 32) plus half the table's last digit."""
+    table = np.array([10.2158, 21.26, 34.88, 39.77])
+    values = {n: disc_lambdas(0.05, n)[[0, 1, 3, 5]] for n in (16, 32, 64)}
+    assert np.allclose(disc_lambdas(0.05, 16)[[1, 3]], disc_lambdas(0.05, 16)[[2, 4]], rtol=1e-9)  # the pairs
+    error = {n: np.abs(v - table) for n, v in values.items()}
+    early, late = (np.log(error[n] / error[2 * n]) / math.log(2) for n in (16, 32))
+    assert np.all((early < late) & (1.9 <= late) & (late <= 2.1)), (early, late)
+    rich_early, rich_late = ((4 * values[2 * n] - values[n]) / 3 for n in (16, 32))
+    assert np.all(np.abs(rich_late - table) <= np.abs(rich_late - rich_early) + np.array([5e-5, 5e-3, 5e-3, 5e-3]))
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (['solid.shape="disc"', 'solid.edges=["clamped", "clamped", "clamped", "clamped"]'],
+     "solid.edges = .*a disc has one edge, its rim"),
+    (['solid.shape="disc"', 'solid.edges=["simple"]'], "solid.edges = .*Babuska"),
+    (['solid.shape="disc"', 'solid.edges=["free"]'], "solid.edges = .*free to move as a rigid body"),
+    (['solid.shape="disc"', 'solid.edges=["clamped"]', "solid.surface_elements=15"],
+     "solid.surface_elements = 15: a disc's diameter holds an even count"),
+    (['solid.shape="disc"', 'solid.edges=["clamped"]', "solid.thickness=0.1"], "solid.thickness = 0.1: a disc's depth"),
+    (['solid.edges=["clamped"]'], "solid.edges = .*a rectangular bending_plate has four edges"),
+    (['solid.kind="string"', "solid.tension=10.0"], r"solid.edges: a string solid does not use it \(it is read by "
+     "bending_plate, membrane\)"),
+])
+def test_bad_discs_and_misplaced_fields_are_refused_naming_the_field(overrides, message):
+    with pytest.raises(ScenarioError, match=message):
+        S.load(str(SCENARIO), overrides)
+
+
+def test_a_chain_striking_a_clamped_disc_at_its_centre_keeps_the_ledger():
+    """The transducer on a clamped disc of the square's width: the pulse reaches it and the ledger
+    (13) closes within the exact integrator's bound."""
+    sc = S.load(str(SCENARIO), ['solid.shape="disc"', 'solid.edges=["clamped"]', "solid.surface_elements=12",
+                                'simulation.duration="0.4ms"'])
+    ds = run_scenario(sc)
+    assert ds["energy_solid"].values.max() > 0.01 * ds["input_work"].values[-1]
+    assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)

@@ -67,6 +67,17 @@ def test_malformed_overrides(override, words):
     refused([override], *words)
 
 
+@pytest.mark.parametrize("override, words", [
+    ('solid.shape="sphere"', ["solid.shape"]),
+    ("solid.shape=3", ["solid.shape"]),
+    ("solid.edges=[]", ["solid.edges"]),
+    ('solid.edges=["clamped", "clamped", "clamped", "clamped", "clamped"]', ["solid.edges"]),
+    ('solid.edges=["welded", "clamped", "clamped", "clamped"]', ["solid.edges"]),
+])
+def test_bad_surface_shapes_and_edges_are_refused_naming_the_field(override, words):
+    refused([override], *words)
+
+
 def test_duplicate_labels_in_a_medium():
     refused(['media.0.labels=["a", "b", "a"]'], "media.0.labels", "repeats")
 

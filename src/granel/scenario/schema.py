@@ -183,6 +183,8 @@ class PlateMeshSpec(_Strict):
 
 
 Edge = Literal["clamped", "simple", "fixed", "free"]
+# the [solid] fields of the kinds struck across their surface, refused on the kinds that do not read them
+SURFACE_FIELDS = frozenset({"shape", "edges", "surface_elements", "tension", "foundation", "bending_stiffness"})
 
 
 class SolidSpec(_Strict):
@@ -203,20 +205,32 @@ class SolidSpec(_Strict):
                               "[N/m^2]; membrane: per area [N/m^3] (0: none)")
     bending_stiffness: bool = Field(False, description="string: add the cord's bending stiffness E I, I = thickness "
                                     "width^3 / 12 (a tensioned beam)")
-    edges: tuple[Edge, Edge, Edge, Edge] | None = Field(
-        None, description="bending_plate, membrane: its edges (bottom y0, top y0 + length, front z = -thickness/2, "
-        "back z = +thickness/2): a plate's each clamped, simple (supported) or free (default clamped), a membrane's "
-        "fixed or free (default fixed)")
-    surface_elements: int = Field(24, ge=2, le=400, description="bending_plate: elements along its length (and as "
-                                  "many of the same size across its depth)")
+    shape: Literal["rectangle", "disc"] = Field(
+        "rectangle", description="bending_plate, membrane: a rectangle (length along y, thickness across the granular "
+        "plane) or a disc (its diameter the length, centred on y0 + length / 2 in the granular plane)")
+    edges: tuple[Edge, ...] | None = Field(
+        None, min_length=1, max_length=4, description="bending_plate, membrane: a rectangle's four edges (bottom y0, "
+        "top y0 + length, front z = -thickness/2, back z = +thickness/2), a disc's one (its rim): a plate's each "
+        "clamped, simple (supported) or free (default clamped; a disc's rim clamped), a membrane's fixed or free "
+        "(default fixed; a disc's rim free only on a foundation)")
+    surface_elements: int = Field(24, ge=2, le=400, description="bending_plate, membrane: elements along its length "
+                                  "or diameter (and as many of the same size across its depth)")
 
     @model_validator(mode="after")
     def _kind(self):
-        """What the kind itself refuses (`SolidKind.check`: a string without tension, ...)."""
+        """What the kind itself refuses (`SolidKind.check`: a string without tension, ...), and the
+        fields of the solids struck across their surface given to a kind that does not read them."""
         if self.kind != "none":
-            from ..solid.kinds import kind_of  # lazy: the solids' modules load scipy, which reading a file needs not
+            from ..solid.kinds import KINDS, kind_of  # lazy: the solids' modules load scipy, which reading a file needs not
 
-            kind_of(self.kind).check(self)
+            kind = kind_of(self.kind)
+            # fields away from their defaults (a result's scenario attribute holds every field)
+            defaults = {f: type(self).model_fields[f].default for f in SURFACE_FIELDS}
+            given = set() if kind.stand_in else {f for f in SURFACE_FIELDS if getattr(self, f) != defaults[f]}
+            for name in sorted(given - kind.fields):
+                raise ValueError(f"solid.{name}: a {self.kind} solid does not use it (it is read by "
+                                 f"{', '.join(k for k, other in KINDS.items() if name in other.fields)})")
+            kind.check(self)
         return self
 
 

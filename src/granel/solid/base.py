@@ -167,11 +167,13 @@ class LineSampling:
 class SolidKind:
     """One kind of solid (plate, beam, rigid, ...): everything granel asks of a kind, so that no
     layer above the solids tests a kind's name. `name` is the scenario's solid.kind; `elastic`
-    says whether it moves (has DOFs); `fields` are the [solid] fields it is built with.
+    says whether it moves (has DOFs); `fields` are the [solid] fields it is built with;
+    `stand_in` says it replaces any solid (the others' fields given with it are not refused).
     `section` arguments are the scenario's [solid] table, `material` its material record."""
 
     name = ""
     elastic = True
+    stand_in = False
     fields: frozenset[str] = frozenset({"kind", "x0", "y0", "width", "length"})
 
     def check(self, section) -> None:
@@ -234,6 +236,7 @@ class RigidKind(SolidKind):
 
     name = "rigid"
     elastic = False
+    stand_in = True  # `--solid rigid` replaces any solid of a scenario
 
     def build(self, recipe) -> SolidModel:
         return rigid_solid([(c.name, c.position, c.normal) for c in recipe.contacts])

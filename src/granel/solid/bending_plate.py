@@ -17,7 +17,8 @@ from .beam import BeamKind
 from .dispersion import euler_bernoulli_frequency
 
 EDGES = ("bottom", "top", "front", "back")  # y = y0, y = y0 + length, z = -depth/2, z = +depth/2
-EDGE_KINDS = ("clamped", "simple", "free")
+RIM = ("rim",)  # a disc's one edge
+SHAPES = ("rectangle", "disc")
 
 
 def flexural_rigidity(E: float, nu: float, h: float) -> float:
@@ -60,7 +61,8 @@ def _axis(lo: float, length: float, n: int) -> np.ndarray:
 @dataclass
 class Surface:
     """A surface standing across the granular plane, meshed: its mesh (coordinates y, z), the
-    scikit-fem basis of its element, the facets of each edge (bottom, top, front, back)."""
+    scikit-fem basis of its element, the facets of each edge (a rectangle's bottom, top, front,
+    back; a disc's rim), the elements along its line z = 0."""
 
     slab: Slab
     mesh: object
@@ -69,13 +71,49 @@ class Surface:
     n_along: int
 
 
-def standing_surface(slab: Slab, element, n_along: int) -> Surface:
-    """The uniform grid of `slab`'s surface (y over its length, z over its thickness centred on
-    the granular plane) of n_along cells along y and as many of the same size along z (an even
-    count: z = 0 is a grid line), two triangles a cell, with `element`'s basis."""
+def disc_mesh(center_y: float, radius: float, rings: int):
+    """A disc of `radius` centred on (center_y, 0) in triangles whose diameter z = 0 is made of
+    their edges: a centre vertex and `rings` circles of radii i radius / rings holding 6 i vertices
+    each at angles 2 pi k / 6 i (k = 0 and k = 3 i lie on z = 0), each of the six sectors between
+    circles i - 1 and i split into 2 i - 1 triangles: 6 rings^2 triangles of nearly equal size. The
+    rim is the polygon through the outer circle's vertices (its area falls short of pi radius^2 by
+    O(rings^-2))."""
+    from skfem import MeshTri
+
+    points, first = [(0.0, 0.0)], [0]
+    for i in range(1, rings + 1):
+        first.append(len(points))
+        angles = 2 * np.pi * np.arange(6 * i) / (6 * i)
+        points += list(zip(radius * i / rings * np.cos(angles), radius * i / rings * np.sin(angles)))
+
+    def vertex(i, j):
+        return 0 if i == 0 else first[i] + j % (6 * i)
+
+    triangles = []
+    for i in range(1, rings + 1):
+        for s in range(6):
+            for j in range(i):
+                outer, inner = s * i + j, s * (i - 1) + j
+                triangles.append((vertex(i, outer), vertex(i, outer + 1), vertex(i - 1, inner)))
+                if j < i - 1:
+                    triangles.append((vertex(i - 1, inner), vertex(i, outer + 1), vertex(i - 1, inner + 1)))
+    p = np.ascontiguousarray(np.array(points).T + np.array([[center_y], [0.0]]))
+    return MeshTri(p, np.ascontiguousarray(np.array(triangles, dtype=np.int64).T))
+
+
+def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle") -> Surface:
+    """The mesh of `slab`'s surface standing across the granular plane, with `element`'s basis. A
+    rectangle (y over its length, z over its thickness centred on the granular plane): the uniform
+    grid of n_along cells along y and as many of the same size along z (an even count: z = 0 is a
+    grid line), two triangles a cell. A disc (its diameter the length, centred on y0 + length / 2,
+    z = 0): `disc_mesh` with n_along / 2 rings, so n_along elements along its diameter."""
     from skfem import Basis, MeshTri
 
     y0, L, depth = slab.y0, slab.length, slab.thickness
+    if shape == "disc":
+        mesh = disc_mesh(y0 + L / 2, L / 2, max(1, n_along // 2))
+        return Surface(slab, mesh, Basis(mesh, element, intorder=4), {"rim": mesh.boundary_facets()},
+                       2 * max(1, n_along // 2))
     nz = max(2, 2 * int(round(0.5 * n_along * depth / L)))
     mesh = MeshTri.init_tensor(_axis(y0, L, n_along), _axis(-depth / 2, depth, nz))
     tol = 1e-9 * max(L, depth)
@@ -117,6 +155,7 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
     nodes = np.column_stack([np.full(len(on_line), slab.x0 + h / 2), line_y])
     segments = np.column_stack([np.arange(len(on_line) - 1), np.arange(1, len(on_line))])
     segment_of = np.clip(np.searchsorted(line_y, p[0, mesh.t].mean(axis=0)) - 1, 0, len(segments) - 1)
+    volumes = h * np.bincount(segment_of, basis.dx.sum(axis=1), len(segments))  # the triangles' areas
 
     def full(q):
         w = T @ q
@@ -128,32 +167,32 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
         return np.bincount(segment_of, kin, len(segments)), np.bincount(segment_of, pot, len(segments))
 
     info = {"dofs": int(len(keep)), "elements": int(mesh.t.shape[1]), "nodes": int(p.shape[1]), "width": h,
-            "depth": slab.thickness, "full_dofs": int(basis.N), "along": int(surface.n_along)} | info
+            "depth": float(np.ptp(p[1])), "full_dofs": int(basis.N), "along": int(surface.n_along)} | info
     model = SolidModel(kind, (T.T @ M @ T).tocsr(), (T.T @ K @ T).tocsr(), cps, info, T, nodes, segments, energies,
-                       h * slab.thickness * np.diff(line_y), full)
+                       volumes, full)
     model.basis = basis
     model.line_dofs = u_dofs[on_line]
     model.unit_weight = np.column_stack([T.T @ (M @ translation), np.zeros(len(keep))])
     return model
 
 
-def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4
-                        ) -> SolidModel:
+def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4,
+                        shape: str = "rectangle") -> SolidModel:
     """The Kirchhoff plate of `slab` (h = width, along x; the length along y; its depth along z =
-    thickness, centred on the granular plane) on `standing_surface`'s grid of Morley triangles.
-    edges: (bottom, top, front, back) each 'clamped' (w and its normal slope held), 'simple' (w
-    held) or 'free'. contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0.
-    ValueError for edges that leave it free to move as a rigid body, or a contact off a vertex or
-    on a held edge."""
+    thickness, centred on the granular plane; a disc's diameter the length) on
+    `standing_surface`'s Morley triangles. edges: a rectangle's (bottom, top, front, back), a
+    disc's (rim,), each 'clamped' (w and its normal slope held), 'simple' (w held) or 'free'.
+    contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0. ValueError for edges that
+    leave it free to move as a rigid body, or a contact off a vertex or on a held edge."""
     from skfem import ElementTriMorley
 
-    surface = standing_surface(slab, ElementTriMorley(), n_along)
+    surface = standing_surface(slab, ElementTriMorley(), n_along, shape)
     mesh, basis = surface.mesh, surface.basis
     D, rho_h = flexural_rigidity(material.E, material.nu, slab.width), material.rho * slab.width
     stiffness, mass, strain, kinetic = kirchhoff_forms(D, material.nu, rho_h)
     K, M = stiffness.assemble(basis).tocsr(), mass.assemble(basis).tocsr()
     fixed = np.zeros(basis.N, bool)
-    for side, how in zip(EDGES, edges):
+    for side, how in zip(surface.edge_facets, edges, strict=True):
         dofs = basis.get_dofs(surface.edge_facets[side])
         if how == "clamped":
             fixed[dofs.all()] = True
@@ -186,38 +225,71 @@ class BendingPlateKind(BeamKind):
     drawn, exported and sampled along its line z = 0 as a beam is along its axis."""
 
     name = "bending_plate"
-    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements"}
+    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape"}
 
     edge_kinds = ("clamped", "simple", "free")  # the first is the default
+    disc_edge_kinds = ("clamped",)  # a disc's rim: simply supported is refused (Babuska's paradox), free moves
 
     def edges(self, section) -> tuple[str, ...]:
-        """Its four edges as the [solid] table gives them, or the default for each."""
-        return tuple(section.edges) if section.edges is not None else (self.edge_kinds[0],) * 4
+        """Its edges as the [solid] table gives them (a rectangle's four, a disc's rim), or the
+        default for each."""
+        count = 1 if section.shape == "disc" else 4
+        return tuple(section.edges) if section.edges is not None else (self.edge_kinds[0],) * count
 
     def check(self, section) -> None:
         edges = self.edges(section)
+        if section.shape == "disc":
+            self._check_disc(section, edges)
+        elif len(edges) != 4:
+            raise ValueError(f"solid.edges = {list(edges)}: a rectangular {self.name} has four edges (bottom, top, "
+                             "front, back)")
         if any(e not in self.edge_kinds for e in edges):
             raise ValueError(f"solid.edges = {list(edges)}: a {self.name}'s edges are each one of "
                              f"{', '.join(self.edge_kinds)}")
         if all(e == "free" for e in edges) and not getattr(section, "foundation", 0):
             raise ValueError(f"solid.edges: a {self.name} with every edge free moves as a rigid body; hold an edge")
 
+    def _check_disc(self, section, edges) -> None:
+        """A disc: one edge (its rim) of `disc_edge_kinds`, an even count of elements along its
+        diameter (its centre a node), and its depth its diameter (`thickness` is not read: left at
+        its default or equal to the length)."""
+        if len(edges) != 1:
+            raise ValueError(f"solid.edges = {list(edges)}: a disc has one edge, its rim: give one value")
+        if edges[0] not in self.disc_edge_kinds and not (edges[0] == "free" and getattr(section, "foundation", 0)):
+            why = ("on the polygon that meshes the rim the solution tends to a different plate's (Babuska's paradox)"
+                   if edges[0] == "simple" else "a free rim leaves it free to move as a rigid body")
+            raise ValueError(f"solid.edges = {list(edges)}: a {self.name} disc's rim is "
+                             f"{' or '.join(self.disc_edge_kinds)} ({why})")
+        if section.surface_elements % 2:
+            raise ValueError(f"solid.surface_elements = {section.surface_elements}: a disc's diameter holds an even "
+                             "count of elements (its centre is a node)")
+        if section.thickness not in (section.length, type(section).model_fields["thickness"].default):
+            raise ValueError(f"solid.thickness = {section.thickness:g}: a disc's depth across the granular plane is its "
+                             f"diameter, solid.length = {section.length:g}; leave thickness out")
+
     def recipe_fields(self, section, material) -> dict:
         edges = self.edges(section)
+        depth = section.length if section.shape == "disc" else section.thickness
         return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length,
-                    thickness=section.thickness, E=material.E, rho=material.rho, nu=material.nu,
-                    beam_elements=section.surface_elements, edges=edges,
-                    clamped=(edges[0] != "free", edges[1] != "free"))
+                    thickness=depth, E=material.E, rho=material.rho, nu=material.nu,
+                    beam_elements=section.surface_elements, edges=edges, shape=section.shape,
+                    clamped=(edges[0] != "free", edges[min(1, len(edges) - 1)] != "free"))
 
     def build(self, recipe) -> SolidModel:
         r = recipe
         return build_bending_plate(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
-                                   r.beam_elements, r.edges)
+                                   r.beam_elements, r.edges, r.shape)
 
     def size(self, section) -> tuple[int, int]:
-        """Morley: a DOF per vertex and per edge of the (n_along x n_across) grid of two triangles a
-        cell; its elements as drawn and exported: the segments of its line z = 0."""
+        """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike); its
+        elements as drawn and exported: the segments of its line z = 0. The rectangle's grid of
+        n_along x n_across cells of two triangles; the disc's 1 + 3 n (n + 1) vertices and 6 n^2
+        triangles of n rings (its edges: vertices + triangles - 1, by Euler)."""
         ny = section.surface_elements
+        if section.shape == "disc":
+            n = ny // 2
+            vertices, triangles = 1 + 3 * n * (n + 1), 6 * n * n
+            return 2 * vertices + triangles - 1, 2 * n
         nz = max(2, 2 * int(round(0.5 * ny * section.thickness / section.length)))
         vertices, cells = (ny + 1) * (nz + 1), ny * nz
         return vertices + (ny * (nz + 1) + nz * (ny + 1) + cells), ny

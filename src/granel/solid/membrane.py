@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Material, Slab, SolidModel
-from .bending_plate import EDGES, BendingPlateKind, standing_surface, surface_model
+from .bending_plate import BendingPlateKind, standing_surface, surface_model
 from .dispersion import string_frequency
 
 
@@ -39,24 +39,24 @@ def membrane_forms(tension: float, foundation: float, rho_h: float):
 
 
 def build_membrane(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("fixed",) * 4,
-                   tension: float = 0.0, foundation: float = 0.0) -> SolidModel:
+                   tension: float = 0.0, foundation: float = 0.0, shape: str = "rectangle") -> SolidModel:
     """The membrane of `slab` (h = width, its thickness along x; the length along y; its depth
     along z = thickness, centred on the granular plane), `tension` N [N/m] and `foundation` k_f
-    [N/m^3], on `standing_surface`'s grid of P2 triangles. edges: (bottom, top, front, back) each
-    'fixed' (w = 0) or 'free'. ValueError if it is free to move as a rigid body (no edge fixed, no
+    [N/m^3], on `standing_surface`'s P2 triangles (a disc's diameter the length). edges: a
+    rectangle's (bottom, top, front, back), a disc's (rim,), each 'fixed' (w = 0) or 'free'. ValueError if it is free to move as a rigid body (no edge fixed, no
     foundation), or for a contact off a vertex of z = 0 or on a fixed edge."""
     from skfem import ElementTriP2
 
     if foundation == 0 and all(e == "free" for e in edges):
         raise ValueError(f"solid.edges = {list(edges)}: a membrane with every edge free and no foundation moves as a "
                          "rigid body; fix an edge or give it a foundation (solid.foundation)")
-    surface = standing_surface(slab, ElementTriP2(), n_along)
+    surface = standing_surface(slab, ElementTriP2(), n_along, shape)
     basis = surface.basis
     rho_h = material.rho * slab.width
     stiffness, mass, strain, kinetic = membrane_forms(tension, foundation, rho_h)
     K, M = stiffness.assemble(basis).tocsr(), mass.assemble(basis).tocsr()
     fixed = np.zeros(basis.N, bool)
-    for side, how in zip(EDGES, edges):
+    for side, how in zip(surface.edge_facets, edges, strict=True):
         if how == "fixed":
             fixed[basis.get_dofs(surface.edge_facets[side]).all()] = True
     return surface_model("membrane", surface, K, M, fixed, np.ones(basis.N), contacts, strain, kinetic,
@@ -71,6 +71,7 @@ class MembraneKind(BendingPlateKind):
     fields = BendingPlateKind.fields | {"tension", "foundation"}
 
     edge_kinds = ("fixed", "free")
+    disc_edge_kinds = ("fixed",)  # free only on a foundation
 
     def check(self, section) -> None:
         if not section.tension > 0:
@@ -83,7 +84,7 @@ class MembraneKind(BendingPlateKind):
     def build(self, recipe) -> SolidModel:
         r = recipe
         return build_membrane(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
-                              r.beam_elements, r.edges, r.tension, r.foundation)
+                              r.beam_elements, r.edges, r.tension, r.foundation, r.shape)
 
     def size(self, section) -> tuple[int, int]:
         """P2: a DOF per vertex and per edge of the grid, as Morley has."""

@@ -35,7 +35,7 @@ class SolidRecipe:
     [kg/m^3], the contacts, the plate's mesh, the beam's or string's element count, the clamped
     (held) ends (bottom, top), the string's tension [N], its foundation's stiffness per length
     [N/m^2] and whether it bends, and a bending plate's edges (bottom, top, front, back: clamped,
-    simple or free). Fields a kind does not use keep their defaults."""
+    simple or free; a disc's rim) and shape (rectangle or disc). Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
@@ -54,6 +54,7 @@ class SolidRecipe:
     foundation: float = 0.0
     bending: bool = True
     edges: tuple[str, ...] = ()
+    shape: str = "rectangle"
 
     @property
     def slab(self) -> Slab:
@@ -80,8 +81,9 @@ class SolidRecipe:
         kind, elements = str(d.pop("kind")), int(d.pop("beam_elements"))
         bending = bool(d.pop("bending", True))
         edges = tuple(str(e) for e in d.pop("edges", ()))
+        shape = str(d.pop("shape", "rectangle"))
         return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending, edges=edges,
-                   **{k: float(v) for k, v in d.items()})
+                   shape=shape, **{k: float(v) for k, v in d.items()})
 
 
 def build_solid_model(recipe: SolidRecipe) -> SolidModel:
