@@ -78,6 +78,14 @@ def test_bad_surface_shapes_and_edges_are_refused_naming_the_field(override, wor
     refused([override], *words)
 
 
+@pytest.mark.parametrize("center_y", ["0.5", "-0.2"])
+def test_a_medium_beside_the_solid_but_beyond_its_ends_is_refused(center_y):
+    """Its column 0 would face no surface (the paper's plate spans y = 0 to its length): named,
+    before any computation."""
+    with pytest.raises(S.ScenarioError, match=r"media.0: granule .* beyond them .*media.0.center_y"):
+        S.build_granular(S.load("paper", [f"media.0.center_y={center_y}"]))
+
+
 def test_duplicate_labels_in_a_medium():
     refused(['media.0.labels=["a", "b", "a"]'], "media.0.labels", "repeats")
 

@@ -94,12 +94,14 @@ def _face_and_centre(m, solid) -> tuple[float, float]:
 
 def solid_contacts_for(sc: Scenario, media) -> list:
     """Contact points of the solid: the granules of column 0 of each medium beside the solid
-    whose centre lies within the solid's length, at the face point nearest to the centre."""
+    (within its radius and the medium's gap of the face), at the face point nearest to the
+    centre. ScenarioError naming the medium for a granule of column 0 level with the solid's ends
+    or beyond them (it would face no surface: it would pass the solid by, or strike its corner)."""
     s = present_solid(sc)
     if s is None:
         return []
     out, offset = [], 0
-    for med in media:
+    for k, med in enumerate(media):
         if med.side in ("left", "right"):
             face = s.x0 if med.side == "left" else s.x0 + s.width
             nrm = (1.0, 0.0) if med.side == "left" else (-1.0, 0.0)
@@ -107,7 +109,14 @@ def solid_contacts_for(sc: Scenario, media) -> list:
                 x, y = med.pos[g]
                 R = med.radius[g]
                 dist = (face - x) * nrm[0]
-                if s.y0 < y < s.y0 + s.length and dist < R * (1 + 1e-9) + 1e-12 and dist > 0:
+                if not 0 < dist < R * (1 + 1e-9) + 1e-12 + sc.media[k].gap:
+                    continue
+                if not s.y0 < y < s.y0 + s.length:
+                    raise ScenarioError(
+                        f"media.{k}: granule {med.name}:{med.labels[g]} faces the solid at y = {y:.6g} m, level with "
+                        f"its ends or beyond them (solid.y0 = {s.y0:g}, solid.y0 + length = {s.y0 + s.length:g}): "
+                        f"place the medium on the solid's face (media.{k}.center_y) or lengthen it (solid.length)")
+                if dist < R * (1 + 1e-9) + 1e-12:
                     out.append(SolidContact(offset + g, (face, float(y)), nrm, f"{med.name}:{med.labels[g]}"))
         offset += med.n
     return out
