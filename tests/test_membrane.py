@@ -18,7 +18,7 @@ from granel.run import run_scenario
 from granel.scenario.schema import ScenarioError
 from granel.solid.base import Material, Slab
 from granel.solid.kinds import kind_of
-from granel.solid.membrane import build_membrane
+from granel.solid.membrane import MEMBRANE, build_membrane
 
 from test_exact import ledger_bound
 
@@ -121,3 +121,16 @@ def test_a_disc_on_a_foundation_may_have_a_free_rim_and_a_free_rim_alone_is_refu
     with pytest.raises(ScenarioError, match="solid.edges = .*free to move as a rigid body"):
         S.load(str(SCENARIO), base + ["solid.foundation=0.0"])
     assert S.load(str(SCENARIO), base + ["solid.foundation=1e6"]).solid.shape == "disc"
+
+
+def test_the_p2_dispersion_law_bounds_the_membranes_frequency_error():
+    """The law `granel wavefield` reads for the membrane (`MembraneKind.dispersion`, C (K l)^4,
+    C = 0.0012) against the exact c K of a fixed 2:1 rectangle's lowest modes matched by their
+    count (16 elements along it): the relative errors (+1e-3 (K l)^4 measured) lie within it."""
+    law, power = MEMBRANE.dispersion
+    a, b, n = 0.1, 0.05, 16
+    model = build_membrane(Slab(0.0, 0.0, H, a, b), RUBBER, [], n, ("fixed",) * 4, N, 0.0)
+    w = np.sqrt(np.sort(eigsh(model.K.tocsc(), 8, model.M.tocsc(), sigma=0.0, which="LM")[0]))
+    K = np.sort([math.pi * math.hypot(m / a, k / b) for m in range(1, 9) for k in range(1, 5)])[:8]
+    error = w / (C * K) - 1
+    assert np.all((0 < error) & (error <= law * (K * a / n) ** power)), error / (K * a / n) ** power

@@ -13,16 +13,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..io.results import ResultFileError
+from ..solid.base import QUADRATIC_DISPERSION
 from ..solid.kinds import kind_of
 from .modal import modal_energies
 
 ENDS = {(True, True): "clamped-clamped", (False, False): "free-free", (True, False): "clamped-free",
         (False, True): "free-clamped"}
-# the relative frequency error of quadratic finite elements with consistent mass is (kl)^4 / 1440 at
-# wavenumber k and element length l (docs/wavefield.md, "Which wavenumbers can be trusted")
-FE_DISPERSION = 1.0 / 1440.0
 # the frequency error the wavenumbers called resolved stay below (`resolved_wavenumber`)
 FE_ERROR = 0.0025
+FE_DISPERSION = QUADRATIC_DISPERSION  # the plate's and beam's law (each kind's: `LineSampling.dispersion`)
 
 
 # --------------------------------------------------------------------------------------------
@@ -115,7 +114,8 @@ class NodeLines:
     rule's width share on the plate, rho A on the beam), the velocity components sampled
     ("x", "y" on the plate: across and along the length; "x" on the beam), the basis along the
     length and the sparse map from the reduced DOFs to the sampled velocities, rows ordered
-    (line, component, sample). `element` is the longest element along the length [m]."""
+    (line, component, sample). `element` is the longest element along the length [m],
+    `dispersion` its kind's frequency error law (`solid.base.LineSampling`)."""
 
     kind: str
     x: np.ndarray
@@ -124,6 +124,7 @@ class NodeLines:
     basis: SpatialBasis
     sampling: sp.csr_matrix
     element: float
+    dispersion: tuple[float, int] = (QUADRATIC_DISPERSION, 4)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -138,15 +139,16 @@ def node_lines(model, samples: int | None = None) -> NodeLines:
     r = model.recipe
     basis = spatial_basis(r.y0, r.length, lines.count, tuple(bool(c) for c in r.clamped))
     return NodeLines(model.kind, lines.x, lines.mass, lines.components, basis, (lines.sampler(basis.y) @ model.T).tocsr(),
-                     lines.element)
+                     lines.element, lines.dispersion)
 
 
 def resolved_wavenumber(lines: NodeLines, error: float = FE_ERROR) -> float:
     """The wavenumber [rad/m] below which the elements' dispersion error stays under `error`:
-    (kl)^4 FE_DISPERSION = error with l the longest element along the length, the estimate of
-    quadratic elements (the plate's Q8 sides; the beam's Hermite cubics are more accurate) for a
-    1-D wave along the element."""
-    return (error / FE_DISPERSION) ** 0.25 / lines.element
+    C (kl)^p = error with l the longest element along the length and (C, p) its kind's law
+    (`lines.dispersion`: quadratic elements' (kl)^4 / 1440 on the plate's sides and, as a bound,
+    the beam's Hermite cubics; Morley's 0.15 (kl)^2 on the plate in bending, ...)."""
+    constant, power = lines.dispersion
+    return (error / constant) ** (1.0 / power) / lines.element
 
 
 def sampled_shapes(lines: NodeLines, modes) -> np.ndarray:

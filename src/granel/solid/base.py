@@ -148,13 +148,20 @@ class Patches:
     values: np.ndarray
 
 
+# the relative frequency error of quadratic finite elements with consistent mass is (kl)^4 / 1440 at
+# wavenumber k and element length l (docs/wavefield.md, "Which wavenumbers can be trusted"): the
+# plate's Q8 sides, and an upper bound for the beam's Hermite cubics
+QUADRATIC_DISPERSION = 1.0 / 1440.0
+
+
 @dataclass(frozen=True)
 class LineSampling:
     """How a solid's velocity is sampled along its length (the wavefield, docs/wavefield.md): lines
     at x (nl,) [m] standing for the mass per length `mass` (nl,) [kg/m], the velocity `components`
     sampled on each, `count` samples along the length, `element` the longest element along it [m],
     and `sampler(y)`: the sparse map from the full nodal DOFs (T q) to the samples at heights y,
-    rows ordered (line, component, sample)."""
+    rows ordered (line, component, sample). `dispersion` (C, p): the elements' relative frequency
+    error |C| (k l)^p at wavenumber k (l = element), as measured or derived for their kind."""
 
     x: np.ndarray
     mass: np.ndarray
@@ -162,6 +169,7 @@ class LineSampling:
     count: int
     element: float
     sampler: Callable[[np.ndarray], sp.csr_matrix]
+    dispersion: tuple[float, int] = (QUADRATIC_DISPERSION, 4)
 
 
 class SolidKind:

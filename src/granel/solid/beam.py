@@ -191,6 +191,8 @@ class BeamKind(SolidKind):
         """The full DOF of each drawn node's deflection (the Hermite line's: every other one)."""
         return 2 * np.arange(len(model.nodes))
 
+    dispersion = LineSampling.dispersion  # Hermite cubics: below the quadratic elements' (kl)^4 / 1440
+
     def wave_lines(self, model, samples=None) -> LineSampling:
         """Its one line of nodes: every node that is not clamped, the deflection sampled."""
         r = model.recipe
@@ -206,7 +208,7 @@ class BeamKind(SolidKind):
             return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), dofs[at])), shape=(len(at), full))
 
         return LineSampling(np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",), count,
-                            float(r.length / ne), sampler)
+                            float(r.length / ne), sampler, self.dispersion)
 
     def branches(self, model, k, count=3):
         """The Euler-Bernoulli branch (EB) of its EI and rho A."""
