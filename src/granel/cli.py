@@ -298,15 +298,17 @@ def animate(
 def bench(
     quick: bool = typer.Option(False, "--quick", help="short runs (0.1 ms), no `granel paper` timing"),
     json_out: bool = typer.Option(False, "--json", help="print one JSON object"),
-    cases: Optional[str] = typer.Option(None, help="comma list of case tags, e.g. plate-SSGMC-strong"),
-    duration: Optional[str] = typer.Option(None, help="simulated time per case (default 0.8 ms, 0.1 ms with --quick)"),
+    cases: Optional[str] = typer.Option(None, help="comma list of case tags, e.g. plate-SSGMC-strong, or built-in "
+                                        "scenario cases (chain-on-plate)"),
+    duration: Optional[str] = typer.Option(None, help="simulated time per case (default 0.8 ms, a scenario case's own; "
+                                           "0.1 ms with --quick)"),
     reference: bool = typer.Option(False, "--reference", help="also each method's errors against Newmark at 2.5 ns "
-                                   "on the strong SSGM-side plate case (when it is among the cases)"),
+                                   "on the strong SSGM-side plate case and the scenario cases (when among the cases)"),
     fresh: bool = typer.Option(True, "--fresh/--no-fresh", help="time `granel run` in fresh processes"),
 ):
     """The paper's algorithm and the fast method (its exact integrator, and Newmark at dtau0) side by
-    side in one process: wall times, ratios, steps, deviations; fresh-process and `granel paper`
-    times."""
+    side in one process, on the paper's cases and a chain on a plate in bending: wall times,
+    ratios, steps, deviations; fresh-process and `granel paper` times."""
     from .studies.benchmark import bench_rows, check_bench_options, run_bench
 
     only = check_bench_options(cases, duration)

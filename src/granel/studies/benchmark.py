@@ -25,6 +25,9 @@ from .paper import CASES, case_scenario, case_tag
 # exact integrator, and with modal Newmark at dtau0
 METHODS = {"paper": ("paper", []), "exact": ("fast", []), "newmark": ("fast", ['simulation.integrator="newmark"'])}
 REFERENCE_CASE = ("plate", "SSGM:C", "strong")
+# built-in scenarios beyond the paper's set-up, run by every method as the paper's cases are (their own
+# duration unless --duration says; --quick: 0.1 ms); with --reference each against Newmark at 2.5 ns
+SCENARIO_CASES = ("chain-on-plate",)
 
 
 def energy_deviation_pct(a, b) -> float:
@@ -70,6 +73,69 @@ def errors(ds, ref) -> dict:
     return out
 
 
+def scenario_deviations(a, b) -> tuple[float, float]:
+    """Two runs of one scenario: the largest difference of every energy the runs store (the media,
+    the solid, the walls, gravity's) over the input work [%], and the relative L2 difference of
+    the excited granule's velocity along its load."""
+    from ..analysis.reciprocity import directed_velocity, excitation_of
+
+    n = min(a.sizes["time"], b.sizes["time"])
+    w = float(b["input_work"].values.max())
+    names = [k for k in b.data_vars if k.startswith("energy_") and k in a.data_vars]
+    energy = max(float(np.abs(a[k].values[:n] - b[k].values[:n]).max()) / w for k in names)
+    label, d = excitation_of(b)
+    va, vb = directed_velocity(a, label, d)[:n], directed_velocity(b, label, d)[:n]
+    return 100 * energy, float(np.linalg.norm(va - vb) / np.linalg.norm(vb))
+
+
+def scenario_case(name: str, solver: str, extra=()):
+    """A built-in scenario (`SCENARIO_CASES`) under `solver` with `extra` overrides."""
+    from .. import scenario as S
+
+    return S.load(name, [f'simulation.solver="{solver}"', *extra])
+
+
+def _bench_scenarios(only, duration, quick, reference, log) -> list[dict]:
+    """The rows of the scenario cases (`SCENARIO_CASES`), as the paper's: each method's time and
+    steps, its ratio to the paper's algorithm and its deviation from it; with `reference`, each
+    method's errors against Newmark at a fixed 2.5 ns (energies over the input, the excited
+    granule's velocity, the balance (13))."""
+    from ..run import run_scenario
+
+    rows = []
+    for name in SCENARIO_CASES:
+        if only and name not in only:
+            continue
+        dur = duration or ("0.1ms" if quick else None)
+        span = [f'simulation.duration="{dur}"'] if dur else []
+        for solver, extra in METHODS.values():  # compile and cache the modes outside the timings
+            run_scenario(scenario_case(name, solver, ['simulation.duration="2us"', *extra]))
+        res, row = {}, {"tag": name}
+        for method, (solver, extra) in METHODS.items():
+            t0 = time.perf_counter()
+            res[method] = run_scenario(scenario_case(name, solver, [*span, *extra]))
+            row[method + "_s"] = time.perf_counter() - t0
+            row[method + "_steps"] = int(res[method].attrs["solver_steps"])
+        for method in ("exact", "newmark"):
+            row[method + "_ratio"] = row["paper_s"] / row[method + "_s"]
+            row[method + "_energy_dev_pct"], row[method + "_velocity_rel_l2"] = scenario_deviations(res[method],
+                                                                                                  res["paper"])
+        if reference:
+            ref = run_scenario(scenario_case(name, "fast", [*span, 'simulation.dt="2.5ns"',
+                                                            'simulation.integrator="newmark"']))
+            row["reference"] = {}
+            for method in METHODS:
+                energy, velocity = scenario_deviations(res[method], ref)
+                row["reference"][method] = {"energy": energy / 100, "v_excited": velocity,
+                                            "balance": relative_balance_error(res[method])}
+                log(f"{name} against Newmark at 2.5 ns: {method}: energies {energy / 100:.1e}, velocity "
+                    f"{velocity:.1e}, balance {row['reference'][method]['balance']:.1e}")
+        log(f"{name}: paper {row['paper_s']:.2f} s, exact {row['exact_s']:.3f} s (ratio {row['exact_ratio']:.1f}, "
+            f"{row['exact_steps']} steps), newmark {row['newmark_s']:.3f} s (ratio {row['newmark_ratio']:.1f})")
+        rows.append(row)
+    return rows
+
+
 def fresh_run_seconds(case, duration: str | None = None) -> float:
     """Wall time of a `granel run` of a paper case in a fresh process (imports, compiled-code
     cache, modes, run, NetCDF write)."""
@@ -104,7 +170,7 @@ def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True
     for case in CASES:
         if only and case_tag(case) not in only:
             continue
-        res, row = {}, {"solid": case[0], "excite": case[1], "shock": case[2]}
+        res, row = {}, {"tag": case_tag(case), "solid": case[0], "excite": case[1], "shock": case[2]}
         for name, (solver, extra) in METHODS.items():
             sc = case_scenario(case, solver, [f'simulation.duration="{dur}"', *extra])
             t0 = time.perf_counter()
@@ -122,8 +188,9 @@ def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True
             f"{row['exact_steps']} steps), newmark {row['newmark_s']:.3f} s (ratio {row['newmark_ratio']:.1f}); against "
             f"the paper: energy {row['exact_energy_dev_pct']:.4f} / {row['newmark_energy_dev_pct']:.4f} %, velocity L2 "
             f"{row['exact_velocity_rel_l2']:.2e} / {row['newmark_velocity_rel_l2']:.2e}")
+    out["scenario_cases"] = _bench_scenarios(only, duration, quick, reference, log)
     for name in METHODS:
-        out[name + "_total_s"] = sum(r[name + "_s"] for r in out["cases"])
+        out[name + "_total_s"] = sum(r[name + "_s"] for r in [*out["cases"], *out["scenario_cases"]])
     if reference and REFERENCE_CASE in results:
         ref = run_scenario(case_scenario(REFERENCE_CASE, "fast", [f'simulation.duration="{dur}"', 'simulation.dt="2.5ns"',
                                                                   'simulation.integrator="newmark"']))
@@ -148,14 +215,15 @@ def run_bench(quick=False, only=None, duration=None, reference=False, fresh=True
 
 
 def check_bench_options(cases: str | None, duration: str | None) -> list[str] | None:
-    """`granel bench --cases` (paper case tags, comma separated) and `--duration` (a positive
+    """`granel bench --cases` (paper case tags or built-in scenario cases, comma separated) and
+    `--duration` (a positive
     simulated time the paper cases can run: the scenario's own checks), checked before any
     benchmark runs; returns the cases asked for (None: all). InputError naming the option."""
     from ..io.units import parse_time
 
     only = None
     if cases is not None:
-        tags = [case_tag(c) for c in CASES]
+        tags = [case_tag(c) for c in CASES] + list(SCENARIO_CASES)
         only = [c.strip() for c in cases.split(",")]
         unknown = [c for c in only if c not in tags]
         if unknown:
@@ -178,8 +246,9 @@ def bench_rows(res: dict) -> tuple[list[str], list[list[str]]]:
     """`granel bench`'s table of `run_bench`'s cases: (header, rows)."""
     header = ["case", "paper [s]", "exact [s]", "ratio", "steps", "newmark [s]", "ratio", "energy dev [% input]",
               "velocity rel L2"]
-    rows = [[f"{c['solid']}-{c['excite']}-{c['shock']}", f"{c['paper_s']:.2f}", f"{c['exact_s']:.3f}", f"{c['exact_ratio']:.1f}",
+    rows = [[c["tag"], f"{c['paper_s']:.2f}", f"{c['exact_s']:.3f}", f"{c['exact_ratio']:.1f}",
              str(c["exact_steps"]), f"{c['newmark_s']:.3f}", f"{c['newmark_ratio']:.1f}",
              f"{c['exact_energy_dev_pct']:.4f} / {c['newmark_energy_dev_pct']:.4f}",
-             f"{c['exact_velocity_rel_l2']:.2e} / {c['newmark_velocity_rel_l2']:.2e}"] for c in res["cases"]]
+             f"{c['exact_velocity_rel_l2']:.2e} / {c['newmark_velocity_rel_l2']:.2e}"]
+            for c in [*res["cases"], *res.get("scenario_cases", [])]]
     return header, rows
