@@ -227,9 +227,10 @@ class SolidSpec(_Strict):
             # fields away from their defaults (a result's scenario attribute holds every field)
             defaults = {f: type(self).model_fields[f].default for f in SURFACE_FIELDS}
             given = set() if kind.stand_in else {f for f in SURFACE_FIELDS if getattr(self, f) != defaults[f]}
-            for name in sorted(given - kind.fields):
-                raise ValueError(f"solid.{name}: a {self.kind} solid does not use it (it is read by "
-                                 f"{', '.join(k for k, other in KINDS.items() if name in other.fields)})")
+            unread = sorted(given - kind.fields)
+            if unread:
+                readers = ", ".join(k for k, other in KINDS.items() if unread[0] in other.fields)
+                raise ValueError(f"solid.{unread[0]}: a {self.kind} solid does not use it (it is read by {readers})")
             kind.check(self)
         return self
 
