@@ -2,7 +2,8 @@
 against references no one here wrote: the simply supported rectangle's exact frequencies
 w = pi^2 (m^2 / a^2 + n^2 / b^2) sqrt(D / rho h) with the element's observed convergence order
 (2 for Morley), the clamped square's tabulated ones (Leissa, NASA SP-160, 1969: lambda = w a^2
-sqrt(rho h / D) = 35.99, 73.41), and its refusals of edges that hold nothing."""
+sqrt(rho h / D) = 35.99, 73.41), a sphere striking a large plate against Zener's theory, and its
+refusals of edges that hold nothing."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 from scipy.sparse.linalg import eigsh
 
 from granel import scenario as S
@@ -158,7 +160,7 @@ def test_the_clamped_disc_meets_leissas_table_at_order_two():
     (['solid.shape="disc"', 'solid.edges=["clamped"]', "solid.thickness=0.1"], "solid.thickness = 0.1: a disc's depth"),
     (['solid.edges=["clamped"]'], "solid.edges = .*a rectangular bending_plate has four edges"),
     (['solid.kind="string"', "solid.tension=10.0"], r"solid.edges: a string solid does not use it \(it is read by "
-     "bending_plate, membrane\)"),
+     r"bending_plate, membrane\)"),
 ])
 def test_bad_discs_and_misplaced_fields_are_refused_naming_the_field(overrides, message):
     with pytest.raises(ScenarioError, match=message):
@@ -231,3 +233,103 @@ def test_morleys_dispersion_law_bounds_its_frequency_error(n):
         assert -bound <= error < 0
         if a < b:
             assert error < -0.9 * bound
+
+
+# ------------------------------------------------------------------------ Zener's impact
+
+ZENER = Path(__file__).resolve().parents[1] / "scenarios" / "impact" / "zener-plate.toml"
+
+
+def zener(radius, v0, h, t):
+    """Zener's impact of a steel sphere on a steel plate of thickness h (Zener, Phys. Rev. 59, 669,
+    1941): the plate under the sphere a dashpot of impedance Z = 8 sqrt(D rho h), the contact
+    Hertz's k d^(3/2) (eq. 3, a bead on a face). In Zener's variables (d = a x, t = a s / v0,
+    a = (m v0^2 / k)^(2/5)): x' = u - lambda x^(3/2), u' = -x^(3/2), x(0) = 0, u(0) = 1, with
+    lambda = m v0 / (Z a). Returns lambda, the coefficient of restitution -u at parting and the
+    contact force at times t, by scipy's DOP853."""
+    m = STEEL.rho * 4 / 3 * math.pi * radius**3
+    k = 4 / 3 * STEEL.E / (1 - STEEL.nu**2) * math.sqrt(radius)
+    Z = 8 * math.sqrt(flexural_rigidity(STEEL.E, STEEL.nu, h) * STEEL.rho * h)
+    a = (m * v0**2 / k) ** 0.4
+    lam = m * v0 / (Z * a)
+
+    def parted(s, y):
+        return y[0] if s > 1e-6 else 1.0
+    parted.terminal, parted.direction = True, -1
+    sol = solve_ivp(lambda s, y: [y[1] - lam * max(y[0], 0.0) ** 1.5, -max(y[0], 0.0) ** 1.5], (0.0, 50.0), [0.0, 1.0],
+                    method="DOP853", rtol=1e-12, atol=1e-15, dense_output=True, events=parted)
+    s = np.asarray(t) * v0 / a
+    x = np.where(s < sol.t[-1], sol.sol(np.minimum(s, sol.t[-1]))[0], 0.0)
+    return lam, -sol.y[1, -1], k * a**1.5 * np.maximum(x, 0.0) ** 1.5
+
+
+def restitution(ds) -> float:
+    """The struck sphere's rebound speed over its approach speed, at the first output after its
+    contact with the plate ended."""
+    f, v = ds["contact_force_normal"].values[:, 0], ds["v_x"].values[:, 0]
+    first = int(np.argmax(f > 0))
+    after = first + int(np.argmax(f[first:] <= 0))
+    assert f[after] == 0 and after > first
+    return -v[after] / v[0]
+
+
+@pytest.mark.slow  # about 25 s: three plates of 4,100 DOFs, all their modes
+@pytest.mark.parametrize("h", [2e-3, 1e-3, 0.7e-3])
+def test_a_sphere_striking_a_large_plate_rebounds_as_zener_says(h):
+    """scenarios/impact/zener-plate (a 2 mm sphere at 0.1 m/s on a clamped disc 10 cm across,
+    graded four times toward the contact) over Zener's parameter 0.13, 0.52, 1.06: the
+    coefficient of restitution and the peak force each within 2 % of Zener's (the issue's figure;
+    the contact ends at 17-24 us, before the waves from the rim matter: a 15 cm disc gives the same
+    numbers). Measured: restitution -0.2, -0.3, +1.0 %, peak force -0.1, -0.5, -1.0 %; the
+    difference is the elements' size under the sphere (below) and the energy ledger (13) closes."""
+    sc = S.load(str(ZENER), [f"solid.width={h}"])
+    ds = run_scenario(sc)
+    lam, e, force = zener(0.002, 0.1, h, ds["time"].values)
+    assert lam == pytest.approx({2e-3: 0.130, 1e-3: 0.521, 0.7e-3: 1.064}[h], abs=1e-3)
+    assert abs(restitution(ds) / e - 1) < 0.02
+    assert abs(ds["contact_force_normal"].values[:, 0].max() / force.max() - 1) < 0.02
+    assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)
+
+
+@pytest.mark.slow  # about 5 s
+def test_zeners_peak_force_is_reached_as_the_mesh_is_graded_toward_the_contact():
+    """What separates granel from Zener at lambda = 0.52 is the plate's elements under the sphere:
+    with two levels of grading the peak force falls 3.7 % short, with four 0.5 %; the whole force
+    history follows, within 4.6 % then 0.7 % of the peak (measured). Both fall more than fourfold
+    over the two levels (measured sevenfold; second order in the elements' size would be 16)."""
+    errors = []
+    for levels in (2, 4):
+        ds = run_scenario(S.load(str(ZENER), [f"solid.contact_refinement={levels}"]))
+        f = ds["contact_force_normal"].values[:, 0]
+        force = zener(0.002, 0.1, 1e-3, ds["time"].values)[2]
+        errors.append((abs(f.max() / force.max() - 1), np.abs(f - force).max() / force.max()))
+    for coarse, fine in zip(*errors):
+        assert fine < coarse / 4
+    assert errors[0][0] > 0.02 > errors[1][0]  # graded twice it misses the issue's 2 %, four times it meets it
+
+
+def test_a_graded_mesh_keeps_its_edges_and_line_and_refines_only_near_the_contacts():
+    """`refined_toward` on the clamped disc: each level halves the elements under the contact
+    (their longest edge there is l / 2^levels within round-off of the bisections), leaves the rim's
+    triangles as they were, and keeps the line z = 0 made of edges (every vertex on it is a
+    contact site); the plate's lowest frequency stays at least as close to Leissa's 10.2158 as on
+    the coarse mesh (the graded mesh refines the same disc)."""
+    from granel.solid.bending_plate import REFINE_ZONE, disc_mesh, refined_toward
+
+    coarse = disc_mesh(0.0, 0.05, 10)
+    fine = refined_toward(coarse, [(0.0, 0.0)], 3, 0.005)
+    edge = np.linalg.norm(fine.p[:, fine.facets[0]] - fine.p[:, fine.facets[1]], axis=0)
+    mid = fine.p[:, fine.facets].mean(axis=1)
+    r = np.hypot(mid[0], mid[1])
+    assert edge[r < 0.005 / 8].max() <= 0.005 / 8 * (1 + 1e-9)
+    assert edge[r > 0.05 * 0.95].min() >= 0.005 * 0.5  # the rim's chords as the coarse disc had them
+    assert fine.t.shape[1] > coarse.t.shape[1]
+    assert REFINE_ZONE * 0.005 < 0.05  # the zone lies inside the disc
+    on_line = np.flatnonzero(np.abs(fine.p[1]) < 1e-12)
+    on_edges = {tuple(sorted(e)) for e in fine.facets.T.tolist()}
+    ys = np.argsort(fine.p[0, on_line])
+    assert all(tuple(sorted((int(a), int(b)))) in on_edges for a, b in zip(on_line[ys][:-1], on_line[ys][1:]))
+    base = disc_lambdas(0.05, 20, 1)[0]
+    graded = build_bending_plate(Slab(0.0, -0.05, H, 0.1, 0.1), STEEL, [("B:1", "left", 0.0)], 20, ("clamped",), "disc", 3)
+    w2 = eigsh(graded.K.tocsc(), 1, graded.M.tocsc(), sigma=0.0, which="LM")[0][0]
+    assert math.sqrt(w2) * 0.05**2 * math.sqrt(STEEL.rho * H / D) == pytest.approx(10.2158, rel=abs(base / 10.2158 - 1))

@@ -134,3 +134,21 @@ def test_the_p2_dispersion_law_bounds_the_membranes_frequency_error():
     K = np.sort([math.pi * math.hypot(m / a, k / b) for m in range(1, 9) for k in range(1, 5)])[:8]
     error = w / (C * K) - 1
     assert np.all((0 < error) & (error <= law * (K * a / n) ** power)), error / (K * a / n) ** power
+
+
+def test_a_disc_graded_toward_its_centre_keeps_its_fundamental_and_adds_vertices_only_near_it():
+    """`contact_refinement` on the fixed disc (16 elements across, three levels toward a contact at
+    the centre): the rim's polygon is the coarse one, so the fundamental 2.404826 c / a is met
+    at least as closely as the coarse mesh meets it (its error is the polygon's); the new vertices
+    on z = 0 lie within the refined zone, 4 coarse elements of the centre."""
+    from granel.solid.bending_plate import REFINE_ZONE
+
+    a = 0.05
+    models = [build_membrane(Slab(0.0, -a, H, 2 * a, 2 * a), RUBBER, [("B:1", "left", 0.0)], 16, ("fixed",), N, 0.0,
+                             "disc", levels) for levels in (0, 3)]
+    coarse, graded = (float(np.sqrt(eigsh(m.K.tocsc(), 1, m.M.tocsc(), sigma=0.0, which="LM")[0][0])) * a / C
+                      for m in models)
+    assert abs(graded - 2.404826) <= abs(coarse - 2.404826)
+    assert models[1].info["dofs"] > models[0].info["dofs"]
+    new = np.setdiff1d(np.round(models[1].nodes[:, 1], 12), np.round(models[0].nodes[:, 1], 12))
+    assert len(new) > 0 and np.abs(new).max() < REFINE_ZONE * 2 * a / 16

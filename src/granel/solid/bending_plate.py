@@ -101,21 +101,48 @@ def disc_mesh(center_y: float, radius: float, rings: int):
     return MeshTri(p, np.ascontiguousarray(np.array(triangles, dtype=np.int64).T))
 
 
-def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle") -> Surface:
+# a graded mesh's zone at each level: the triangles within this many of that level's elements of a contact
+REFINE_ZONE = 4.0
+
+
+def refined_toward(mesh, points, levels: int, size: float):
+    """`mesh` refined `levels` times toward `points` (y, z): at level k the triangles whose
+    centroid lies within REFINE_ZONE elements of size / 2^(k-1) of a point are split (scikit-fem's
+    red-green-blue refinement, which keeps the mesh conforming and its angles bounded), so the
+    elements shrink by half at each level toward the points and the mesh's vertices and edges stay
+    vertices and (split) edges."""
+    pts = np.asarray(points, float).reshape(-1, 2)
+    for k in range(levels):
+        if not len(pts):
+            break
+        centroids = mesh.p[:, mesh.t].mean(axis=1)
+        reach = REFINE_ZONE * size / 2**k
+        near = np.min(np.hypot(centroids[0][:, None] - pts[:, 0], centroids[1][:, None] - pts[:, 1]), axis=1) < reach
+        if not near.any():
+            break
+        mesh = mesh.refined(np.flatnonzero(near))
+    return mesh
+
+
+def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle", refine: int = 0,
+                     focus=()) -> Surface:
     """The mesh of `slab`'s surface standing across the granular plane, with `element`'s basis. A
     rectangle (y over its length, z over its thickness centred on the granular plane): the uniform
     grid of n_along cells along y and as many of the same size along z (an even count: z = 0 is a
     grid line), two triangles a cell. A disc (its diameter the length, centred on y0 + length / 2,
-    z = 0): `disc_mesh` with n_along / 2 rings, so n_along elements along its diameter."""
+    z = 0): `disc_mesh` with n_along / 2 rings, so n_along elements along its diameter. With
+    `refine` > 0, graded toward the heights `focus` on z = 0 (the contacts) by `refined_toward`."""
     from skfem import Basis, MeshTri
 
     y0, L, depth = slab.y0, slab.length, slab.thickness
+    points = [(y, 0.0) for y in focus]
     if shape == "disc":
-        mesh = disc_mesh(y0 + L / 2, L / 2, max(1, n_along // 2))
-        return Surface(slab, mesh, Basis(mesh, element, intorder=4), {"rim": mesh.boundary_facets()},
-                       2 * max(1, n_along // 2))
+        rings = max(1, n_along // 2)
+        mesh = refined_toward(disc_mesh(y0 + L / 2, L / 2, rings), points, refine, L / (2 * rings))
+        return Surface(slab, mesh, Basis(mesh, element, intorder=4), {"rim": mesh.boundary_facets()}, 2 * rings)
     nz = max(2, 2 * int(round(0.5 * n_along * depth / L)))
     mesh = MeshTri.init_tensor(_axis(y0, L, n_along), _axis(-depth / 2, depth, nz))
+    mesh = refined_toward(mesh, points, refine, L / n_along)
     tol = 1e-9 * max(L, depth)
     where = {"bottom": lambda p: np.abs(p[0] - y0) < tol, "top": lambda p: np.abs(p[0] - y0 - L) < tol,
              "front": lambda p: np.abs(p[1] + depth / 2) < tol, "back": lambda p: np.abs(p[1] - depth / 2) < tol}
@@ -177,16 +204,17 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
 
 
 def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4,
-                        shape: str = "rectangle") -> SolidModel:
+                        shape: str = "rectangle", refine: int = 0) -> SolidModel:
     """The Kirchhoff plate of `slab` (h = width, along x; the length along y; its depth along z =
     thickness, centred on the granular plane; a disc's diameter the length) on
     `standing_surface`'s Morley triangles. edges: a rectangle's (bottom, top, front, back), a
     disc's (rim,), each 'clamped' (w and its normal slope held), 'simple' (w held) or 'free'.
     contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0. ValueError for edges that
-    leave it free to move as a rigid body, or a contact off a vertex or on a held edge."""
+    leave it free to move as a rigid body, or a contact off a vertex or on a held edge. `refine`:
+    the mesh graded toward the contacts (`refined_toward`)."""
     from skfem import ElementTriMorley
 
-    surface = standing_surface(slab, ElementTriMorley(), n_along, shape)
+    surface = standing_surface(slab, ElementTriMorley(), n_along, shape, refine, [c[2] for c in contacts])
     mesh, basis = surface.mesh, surface.basis
     D, rho_h = flexural_rigidity(material.E, material.nu, slab.width), material.rho * slab.width
     stiffness, mass, strain, kinetic = kirchhoff_forms(D, material.nu, rho_h)
@@ -225,7 +253,7 @@ class BendingPlateKind(BeamKind):
     drawn, exported and sampled along its line z = 0 as a beam is along its axis."""
 
     name = "bending_plate"
-    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape"}
+    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape", "contact_refinement"}
 
     edge_kinds = ("clamped", "simple", "free")  # the first is the default
     # Morley's frequency error at wavenumber K and element l: -0.18 (K l)^2 as K l -> 0 for waves along
@@ -277,12 +305,13 @@ class BendingPlateKind(BeamKind):
         return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length,
                     thickness=depth, E=material.E, rho=material.rho, nu=material.nu,
                     beam_elements=section.surface_elements, edges=edges, shape=section.shape,
+                    refinement=section.contact_refinement,
                     clamped=(edges[0] != "free", edges[min(1, len(edges) - 1)] != "free"))
 
     def build(self, recipe) -> SolidModel:
         r = recipe
         return build_bending_plate(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
-                                   r.beam_elements, r.edges, r.shape)
+                                   r.beam_elements, r.edges, r.shape, r.refinement)
 
     def size(self, section) -> tuple[int, int]:
         """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike); its

@@ -39,18 +39,19 @@ def membrane_forms(tension: float, foundation: float, rho_h: float):
 
 
 def build_membrane(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("fixed",) * 4,
-                   tension: float = 0.0, foundation: float = 0.0, shape: str = "rectangle") -> SolidModel:
+                   tension: float = 0.0, foundation: float = 0.0, shape: str = "rectangle", refine: int = 0) -> SolidModel:
     """The membrane of `slab` (h = width, its thickness along x; the length along y; its depth
     along z = thickness, centred on the granular plane), `tension` N [N/m] and `foundation` k_f
     [N/m^3], on `standing_surface`'s P2 triangles (a disc's diameter the length). edges: a
     rectangle's (bottom, top, front, back), a disc's (rim,), each 'fixed' (w = 0) or 'free'. ValueError if it is free to move as a rigid body (no edge fixed, no
-    foundation), or for a contact off a vertex of z = 0 or on a fixed edge."""
+    foundation), or for a contact off a vertex of z = 0 or on a fixed edge. `refine`: the mesh
+    graded toward the contacts (`bending_plate.refined_toward`)."""
     from skfem import ElementTriP2
 
     if foundation == 0 and all(e == "free" for e in edges):
         raise ValueError(f"solid.edges = {list(edges)}: a membrane with every edge free and no foundation moves as a "
                          "rigid body; fix an edge or give it a foundation (solid.foundation)")
-    surface = standing_surface(slab, ElementTriP2(), n_along, shape)
+    surface = standing_surface(slab, ElementTriP2(), n_along, shape, refine, [c[2] for c in contacts])
     basis = surface.basis
     rho_h = material.rho * slab.width
     stiffness, mass, strain, kinetic = membrane_forms(tension, foundation, rho_h)
@@ -87,7 +88,7 @@ class MembraneKind(BendingPlateKind):
     def build(self, recipe) -> SolidModel:
         r = recipe
         return build_membrane(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
-                              r.beam_elements, r.edges, r.tension, r.foundation, r.shape)
+                              r.beam_elements, r.edges, r.tension, r.foundation, r.shape, r.refinement)
 
     def size(self, section) -> tuple[int, int]:
         """P2: a DOF per vertex and per edge of the grid, as Morley has."""

@@ -35,7 +35,8 @@ class SolidRecipe:
     [kg/m^3], the contacts, the plate's mesh, the beam's or string's element count, the clamped
     (held) ends (bottom, top), the string's tension [N], its foundation's stiffness per length
     [N/m^2] and whether it bends, and a bending plate's edges (bottom, top, front, back: clamped,
-    simple or free; a disc's rim) and shape (rectangle or disc). Fields a kind does not use keep their defaults."""
+    simple or free; a disc's rim), shape (rectangle or disc) and the levels of its mesh's grading toward
+    the contacts. Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
@@ -55,6 +56,7 @@ class SolidRecipe:
     bending: bool = True
     edges: tuple[str, ...] = ()
     shape: str = "rectangle"
+    refinement: int = 0
 
     @property
     def slab(self) -> Slab:
@@ -82,8 +84,9 @@ class SolidRecipe:
         bending = bool(d.pop("bending", True))
         edges = tuple(str(e) for e in d.pop("edges", ()))
         shape = str(d.pop("shape", "rectangle"))
+        refinement = int(d.pop("refinement", 0))
         return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending, edges=edges,
-                   shape=shape, **{k: float(v) for k, v in d.items()})
+                   shape=shape, refinement=refinement, **{k: float(v) for k, v in d.items()})
 
 
 def build_solid_model(recipe: SolidRecipe) -> SolidModel:
