@@ -24,6 +24,21 @@ from .state import CLOCK, DenseOut, ExactConfig, ExactSolid, ExactState, LastSte
 BALANCE_LIMIT = 1e-2
 # outputs per compiled call of the exact integrator
 OUTPUT_BATCH = 64
+# an eigenmode whose contact participation |B phi| is below this share of the largest mode's never
+# moves (a mass-normalised mode's participation is a displacement per unit modal amplitude: at
+# 1e-9 its share of any contact's compliance or energy is below 1e-18 times the largest mode's,
+# times (w_max / w_1)^2 <= 1e10 for the lowest: far below round-off of the ledger (13))
+SILENT = 1e-9
+
+
+def silent_modes(P: np.ndarray) -> np.ndarray:
+    """The modes the contacts cannot move nor feel: P = B Phi's columns (each mode at the
+    contacts) no longer than SILENT times the longest (the antisymmetric modes of a plate struck
+    on its axis of symmetry, say). The exact integrator leaves them out: under forces at the
+    contacts alone their state stays at rest (their modal force P' F vanishes, and the solid's
+    initial state, the static response to forces at the contacts, lies in P's span)."""
+    norms = np.sqrt(np.einsum("ij,ij->j", P, P)) if P.size else np.zeros(P.shape[1])
+    return norms <= SILENT * (norms.max() if len(norms) else 0.0)
 
 
 class ExactSolver:
@@ -51,13 +66,17 @@ class ExactSolver:
         frame = contact_frame(system, model)
         self.mode_cutoff = float(settings.mode_cutoff)
         if model.ndof:
-            keep = modes.omega <= 2 * np.pi * self.mode_cutoff
             B = model.contact_map()
-            P = at_dofs(B, modes.shapes, keep)
+            P_all = at_dofs(B, modes.shapes)
+            # the modes below the cut-off that the contacts move (`silent_modes`: the others never move)
+            self.silent = silent_modes(P_all)
+            keep = (modes.omega <= 2 * np.pi * self.mode_cutoff) & ~self.silent
+            P = np.ascontiguousarray(P_all[:, keep])
             omega = modes.omega[keep]
             # the dropped modes: their static compliance at the contacts, as residual modes
-            self.P_drop = at_dofs(B, modes.shapes, ~keep)
+            self.P_drop = np.ascontiguousarray(P_all[:, ~keep])
             self.omega_drop = modes.omega[~keep]
+            self.keep_index, self.drop_index = np.flatnonzero(keep), np.flatnonzero(~keep)
             om_r, P_r, self.residual_Z, Psi = residual_modes(model, B, modes.shapes, keep, omega,
                                                              partial=modes.count < model.ndof,
                                                              at_contacts=(P, self.P_drop, self.omega_drop))
@@ -67,13 +86,14 @@ class ExactSolver:
             # only the modes below the cut-off are known (a large solid): the solid's state is
             # stored in its reduced nodal coordinates, q = Phi eta + Psi Z q_r; the cut-off is then
             # at most just above the highest of them (a capped count of modes)
-            self.nodal = None if modes.count == model.ndof else (np.asarray(modes.shapes), Psi @ self.residual_Z)
+            self.nodal = None if modes.count == model.ndof else (np.asarray(modes.shapes)[:, keep], Psi @ self.residual_Z)
             if modes.count < model.ndof and len(modes.omega):
                 self.mode_cutoff = min(self.mode_cutoff, float(modes.omega[-1]) / (2 * np.pi) * (1 + 1e-9))
         else:
             P, omega = np.zeros((2 * nc, 0)), np.zeros(0)
             self.kept, self.residual, self.residual_Z, self.nodal = 0, 0, np.zeros((2 * nc, 0)), None
             self.P_drop, self.omega_drop = np.zeros((2 * nc, 0)), np.zeros(0)
+            self.silent, self.keep_index, self.drop_index = np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, np.int64)
         self.modes = modes
         self.solid = ExactSolid(omega=omega, P=P, frame=frame)
         self.normals = contact_normals(system)
@@ -198,10 +218,11 @@ class ExactSolver:
         return self._batch["observation"]
 
     def solid_states(self, rows) -> dict:
-        """All eigenmodes at some outputs of the last batch: the retained ones' state, and the
-        residual modes' state projected on the dropped eigenmodes (their shapes lie in the dropped
-        modes' span: eta_d = W_d^-2 P_d' Z q), so that the modal energies add up to the solid's
-        energy; or, for a large solid, its reduced nodal state."""
+        """All eigenmodes at some outputs of the last batch, in their own order: the retained ones'
+        state, and the residual modes' state projected on the dropped eigenmodes (their shapes lie
+        in the dropped modes' span: eta_d = W_d^-2 P_d' Z q; a silent mode's is zero), so that
+        the modal energies add up to the solid's energy; or, for a large solid, its reduced nodal
+        state."""
         eta, etad = self._batch["eta"][rows], self._batch["etad"][rows]
         nk = self.kept
         if self.nodal is not None:
@@ -214,8 +235,8 @@ class ExactSolver:
         out = {}
         for key, x in (("eta", eta), ("eta_dot", etad)):
             full = np.empty((len(x), nk + len(self.omega_drop)), np.float32)
-            full[:, :nk] = x[:, :nk]
-            full[:, nk:] = x[:, nk:] @ proj
+            full[:, self.keep_index] = x[:, :nk]
+            full[:, self.drop_index] = x[:, nk:] @ proj
             out[key] = full
         return out
 
@@ -224,7 +245,7 @@ class ExactSolver:
         return {"name": "fast", "integrator": "exact", "adaptive": int(s.adaptive), "rtol": s.rtol, "atol": s.atol,
                 "max_step": s.max_step, "dt0": s.dt, "ledger_tol": s.ledger_tol, "mode_cutoff_hz": self.mode_cutoff,
                 "force_model": s.force_model,
-                "residual_modes": self.residual, "modes_kept": self.kept,
+                "residual_modes": self.residual, "modes_kept": self.kept, "modes_silent": int(self.silent.sum()),
                 "abstol": s.abstol, "reltol": s.reltol, "neighbour_rebuilds": self.stepper.rebuilds,
                 "solid_representation": "modal" if self.nodal is None else "nodal"}
 
