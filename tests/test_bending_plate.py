@@ -333,3 +333,54 @@ def test_a_graded_mesh_keeps_its_edges_and_line_and_refines_only_near_the_contac
     graded = build_bending_plate(Slab(0.0, -0.05, H, 0.1, 0.1), STEEL, [("B:1", "left", 0.0)], 20, ("clamped",), "disc", 3)
     w2 = eigsh(graded.K.tocsc(), 1, graded.M.tocsc(), sigma=0.0, which="LM")[0][0]
     assert math.sqrt(w2) * 0.05**2 * math.sqrt(STEEL.rho * H / D) == pytest.approx(10.2158, rel=abs(base / 10.2158 - 1))
+
+
+# ------------------------------------------------------------------------ a protector on the plate
+
+PROTECTOR = Path(__file__).resolve().parents[1] / "scenarios" / "designs" / "plate-protector.toml"
+
+
+def test_the_peak_deflection_is_the_struck_points_read_through_modes_or_nodes():
+    """`analysis.solid.peak_displacement` on the built-in chain-on-plate (400 us: the first swing
+    under the chain): the struck point, the plate's centre, deflects most, so the peak is the
+    largest of its deflection B Phi eta over the stored outputs, to float32 storage (1e-7); a run
+    that stores the reduced nodal state (modes below the cut-off only) gives the same to float32
+    and the eigen-solvers' rounding (measured 4e-8)."""
+    from granel.analysis.result_model import result_modes, result_solid
+    from granel.analysis.solid import peak_displacement
+    from granel.solid.modal import at_dofs
+
+    base = ['simulation.duration="400us"', 'simulation.output_every="2us"', "simulation.mode_cutoff=5e4"]
+    modal = run_scenario(S.load(SCENARIO, base))
+    nodal = run_scenario(S.load(SCENARIO, [*base, 'simulation.modes="below_cutoff"']))
+    assert "solid_x" in nodal and "solid_eta" in modal
+    model, modes = result_solid(modal), result_modes(modal)
+    peak, when = peak_displacement(modal, model, modes)
+    centre = modal["solid_eta"].values.astype(float) @ at_dofs(model.contact_map(), modes.shapes)[0]
+    assert peak == pytest.approx(np.abs(centre).max(), rel=1e-7) and peak > 1e-6
+    assert when == modal["solid_time"].values[np.abs(centre).argmax()]
+    assert peak_displacement(nodal, result_solid(nodal))[0] == pytest.approx(peak, rel=1e-6)
+
+
+def test_the_plate_protector_design_is_accepted_and_its_metrics_measured():
+    """scenarios/designs/plate-protector.toml passes the design checks (two run-mode metrics, the
+    mass constraint), and its base's run gives both objectives: the force on the plate (the
+    recorded contact force's peak) and its deflection; with outputs.solid = false the deflection
+    is NaN with its reason, and 0 on a rigid solid."""
+    from granel.studies.design import check_design, load_design
+    from granel.studies.modes import RunMode, solid_metrics
+
+    spec, folder = load_design(PROTECTOR)
+    check_design(spec, folder)
+    assert [o.metric for o in spec.objectives] == ["peak_solid_force_N", "peak_solid_displacement_m"]
+    base = str(folder / spec.base)
+    sc = S.load(base, ['simulation.duration="300us"'])
+    ds = run_scenario(sc)
+    metrics, notes = RunMode().measure(spec, [("run", sc)], {"run": ds})
+    assert metrics["peak_solid_force_N"] == ds["contact_force_normal"].values.max() > 100
+    assert metrics["peak_solid_displacement_m"] > 1e-6 and "peak_solid_displacement_m" not in notes
+    bare = run_scenario(S.load(base, ['simulation.duration="20us"', "simulation.outputs.solid=false"]))
+    value, why = solid_metrics(bare)
+    assert math.isnan(value["peak_solid_displacement_m"]) and "outputs.solid = false" in why["peak_solid_displacement_m"]
+    rigid = run_scenario(S.load(base, ['simulation.duration="20us"', 'solid.kind="rigid"']))
+    assert solid_metrics(rigid) == ({"peak_solid_displacement_m": 0.0}, {})  # a rigid solid moves nothing

@@ -27,7 +27,7 @@ Runs = list[tuple[str, S.Scenario]]
 SIZE_UNITS = {"granular_mass_kg": "kg", "footprint_m2": "m^2"}
 SETTINGS_TABLE = 'mode = "spectrum" needs a [spectrum] table (drive, measure, ...), and only that mode takes one'
 BAND = "frequencies: a design in spectrum mode needs its band's frequencies [Hz], and only that mode takes them"
-PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N")
+PEAK_METRICS = ("peak_contact_force_N", "peak_wall_force_N", "peak_solid_force_N")
 
 
 class StudyMode(ABC):
@@ -119,7 +119,7 @@ class RunMode(StudyMode):
     name = "run"
     UNITS = {"arrival_measured_s": "s", "arrival_solid_s": "s", "peak_velocity_m_s": "m/s",
              "energy_far_peak_frac": "1", "energy_far_final_frac": "1", "solid_energy_peak_frac": "1",
-             "input_work_J": "J", "spectral_centroid_hz": "Hz", "cutoff_Hz": "Hz"}
+             "input_work_J": "J", "spectral_centroid_hz": "Hz", "cutoff_Hz": "Hz", "peak_solid_displacement_m": "m"}
 
     def scenarios(self, spec, base, overrides, values, check_usage=True):
         return [("run", S.load(base, overrides, check_usage))]
@@ -134,7 +134,8 @@ class RunMode(StudyMode):
         r = run_metrics(ds, measured)
         metrics = {k: float(v) for k, v in r.items() if isinstance(v, (int, float))}
         chain, notes = chain_metrics(ds)
-        return {**metrics, **chain, **force_metrics(scenarios, runs)}, {**r["notes"], **notes}
+        solid, solid_notes = solid_metrics(ds)
+        return {**metrics, **chain, **solid, **force_metrics(scenarios, runs)}, {**r["notes"], **notes, **solid_notes}
 
 
 class ReciprocityMode(StudyMode):
@@ -310,6 +311,25 @@ def chain_metrics(ds) -> tuple[dict[str, float], dict[str, str]]:
         return {"cutoff_Hz": cutoff_frequency(ds, result_system(ds)).cutoff_hz}, {}
     except CutoffError as e:
         return {"cutoff_Hz": float("nan")}, {"cutoff_Hz": str(e)}
+
+
+def solid_metrics(ds) -> tuple[dict[str, float], dict[str, str]]:
+    """peak_solid_displacement_m: the largest displacement of the solid's drawn nodes over the
+    run (`analysis.solid.peak_displacement`; a plate in bending's deflection along the line the
+    granules strike), read through the result's model record; 0 without an elastic solid (a
+    rigid one or none moves nothing, as the peak forces are 0 without their contacts). NaN, with
+    the reason, for a run that did not store its solid's state (simulation.outputs.solid = false)."""
+    from ..analysis.result_model import result_modes, result_solid
+    from ..analysis.solid import peak_displacement
+
+    name = "peak_solid_displacement_m"
+    model = result_solid(ds)
+    if not model.ndof:
+        return {name: 0.0}, {}
+    if "solid_time" not in ds or ("solid_eta" not in ds and "solid_x" not in ds):
+        return {name: float("nan")}, {name: "the run stores no solid state (simulation.outputs.solid = false)"}
+    modes = result_modes(ds) if "solid_eta" in ds else None
+    return {name: peak_displacement(ds, model, modes)[0]}, {}
 
 
 def run_suffixes(keys: list[str]) -> list[str]:
