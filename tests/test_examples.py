@@ -17,6 +17,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
     pytest.param("shaker_and_export.py", "repeats every 2 drive period(s)", marks=pytest.mark.slow),  # about 11 s
     pytest.param("dimer_on_a_cord.py", "wrote dimer_cord.png", marks=pytest.mark.slow),  # about 8 s
     pytest.param("zener_impact.py", "wrote zener_impact.png", marks=pytest.mark.slow),  # about 15 s (two plates' modes)
+    pytest.param("solitary_wave_transducer.py", "wrote solitary_wave_transducer.png", marks=pytest.mark.slow),  # 10 s
 ])
 def test_example_runs(tmp_path, script, expect):
     env = {**os.environ, "GRANEL_EXAMPLE_QUICK": "1", "MPLBACKEND": "Agg"}
