@@ -152,3 +152,24 @@ def test_a_disc_graded_toward_its_centre_keeps_its_fundamental_and_adds_vertices
     assert models[1].info["dofs"] > models[0].info["dofs"]
     new = np.setdiff1d(np.round(models[1].nodes[:, 1], 12), np.round(models[0].nodes[:, 1], 12))
     assert len(new) > 0 and np.abs(new).max() < REFINE_ZONE * 2 * a / 16
+
+
+@pytest.mark.slow  # about 4 s: four 1 ms runs of a 1,600-DOF membrane
+def test_a_tauter_membrane_takes_more_of_the_chains_shock():
+    """scenarios/membrane/dimer-membrane.toml over its tension (scenarios/sweeps/membrane-tension):
+    the membrane's largest share of the input work grows with the tension, as the cord's grows
+    with its impedance and as both predecessors report (measured 2.8, 8.9, 25.8, 52.1 % at 250,
+    1000, 4000, 16000 N/m without foundation), the chain's final share falls, the foundation adds
+    to the membrane's share where the tension is low (5.5 against 2.8 %), and the ledger (13) closes."""
+    shares, kept = [], []
+    for tension in (250.0, 1000.0, 4000.0, 16000.0):
+        sc = S.load(str(SCENARIO), [f"solid.tension={tension}", "solid.foundation=0.0"])
+        ds = run_scenario(sc)
+        work = float(ds["input_work"].values.max())
+        shares.append(float(ds["energy_solid"].values.max()) / work)
+        kept.append(float(ds["energy_d"].values[-1]) / work)
+        assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)
+    assert all(a < b for a, b in zip(shares, shares[1:])) and shares[0] < 0.05 < 0.5 < shares[-1]
+    assert all(a > b for a, b in zip(kept, kept[1:]))
+    supported = run_scenario(S.load(str(SCENARIO), ["solid.tension=250.0"]))
+    assert float(supported["energy_solid"].values.max()) / float(supported["input_work"].values.max()) > 1.5 * shares[0]
