@@ -73,6 +73,11 @@ def test_malformed_overrides(override, words):
     ("solid.edges=[]", ["solid.edges"]),
     ('solid.edges=["clamped", "clamped", "clamped", "clamped", "clamped"]', ["solid.edges"]),
     ('solid.edges=["welded", "clamped", "clamped", "clamped"]', ["solid.edges"]),
+    ("solid.contact_refinement=-1", ["solid.contact_refinement"]),
+    ("solid.contact_refinement=7", ["solid.contact_refinement"]),
+    ("solid.contact_refinement=2.5", ["solid.contact_refinement"]),
+    ("solid.contact_refinement=true", ["solid.contact_refinement", "boolean"]),
+    ("solid.contact_refinement=2", ["solid.contact_refinement", "a plate solid does not use it"]),
 ])
 def test_bad_surface_shapes_and_edges_are_refused_naming_the_field(override, words):
     refused([override], *words)
