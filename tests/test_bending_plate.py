@@ -429,3 +429,25 @@ def test_the_transducers_reflected_waves_follow_the_plates_thickness():
         (primary, _), (secondary, _) = found[h][:2]
         assert secondary - primary == pytest.approx(0.5 / f1, rel=0.1)
     assert len(found[8e-3]) == len(found[12e-3]) == 1
+
+
+def test_a_graded_plates_wavefield_samples_the_coarse_grids_vertices():
+    """On a plate graded toward a contact the wavefield samples the coarse grid (its element sets
+    what is resolved): the same sample count, element and sampled vertices' deflections as the
+    ungraded plate, although the line z = 0 holds more vertices."""
+    from granel.analysis.result_model import result_solid
+    from granel.analysis.wavefield import node_lines
+
+    models = []
+    for levels in (0, 2):
+        ds = run_scenario(S.load(SCENARIO, ['simulation.duration="2us"', f"solid.contact_refinement={levels}"]))
+        models.append(result_solid(ds))
+    coarse, graded = (node_lines(m) for m in models)
+    assert len(models[1].nodes) > len(models[0].nodes)
+    assert graded.shape == coarse.shape and graded.element == coarse.element
+    np.testing.assert_array_equal(graded.basis.y, coarse.basis.y)
+    # the sampled vertices sit at the same heights: the sampling rows pick vertices at basis.y
+    at = [np.asarray(m.nodes[:, 1]) for m in models]
+    for lines, y in zip((coarse, graded), at):
+        assert lines.sampling.shape[0] == len(lines.basis.y)
+    assert np.isin(np.round(coarse.basis.y, 12), np.round(at[1], 12)).all()

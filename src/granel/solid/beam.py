@@ -193,18 +193,28 @@ class BeamKind(SolidKind):
 
     dispersion = LineSampling.dispersion  # Hermite cubics: below the quadratic elements' (kl)^4 / 1440
 
+    def sampled_elements(self, model) -> int:
+        """The elements of the uniform grid its wavefield samples along its length: every one."""
+        return len(model.nodes) - 1
+
     def wave_lines(self, model, samples=None) -> LineSampling:
-        """Its one line of nodes: every node that is not clamped, the deflection sampled."""
+        """Its one line of nodes: every node of the uniform grid of `sampled_elements` that is not
+        clamped, the deflection sampled (each sample height read from the node at it)."""
         r = model.recipe
         if r is None:
             return super().wave_lines(model, samples)
-        ne = len(model.nodes) - 1
+        ne = self.sampled_elements(model)
         clamped = tuple(bool(c) for c in r.clamped)
         count = {(True, True): ne - 1, (False, False): ne + 1}.get(clamped, ne)
         full, dofs = model.T.shape[0], self.deflection_dofs(model)
+        node_y = np.asarray(model.nodes[:, 1], float)
 
         def sampler(y):
-            at = np.rint((np.asarray(y) - r.y0) / (r.length / ne)).astype(int)
+            y = np.asarray(y, float)
+            at = np.clip(np.searchsorted(node_y, y), 1, len(node_y) - 1)
+            at = np.where(np.abs(node_y[at - 1] - y) < np.abs(node_y[at] - y), at - 1, at)
+            if np.abs(node_y[at] - y).max(initial=0.0) > 1e-6 * r.length / ne:
+                raise ValueError(f"a {self.name}'s wavefield samples its nodes: a height off them")
             return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), dofs[at])), shape=(len(at), full))
 
         return LineSampling(np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",), count,

@@ -361,6 +361,12 @@ class BendingPlateKind(BeamKind):
         """The Morley vertex value of each vertex of its line z = 0 (its wavefield samples them)."""
         return np.asarray(model.line_dofs)
 
+    def sampled_elements(self, model) -> int:
+        """The coarse grid's elements along the line z = 0 (`surface_elements`): a mesh graded
+        toward the contacts keeps the coarse vertices, whose spacing sets what the wavefield
+        resolves; the extra vertices near the contacts are not sampled."""
+        return int(model.recipe.beam_elements)
+
     def branches(self, model, k, count=3):
         """The Kirchhoff plate's flexural branch f = k^2 sqrt(D / rho h) / 2 pi (plane waves along y)."""
         return {"flexural": euler_bernoulli_frequency(k, model.info["D"], model.info["rhoh"])}
