@@ -114,15 +114,15 @@ def test_only_the_spectrum_mode_checks_its_settings_before_running():
 
 def test_each_mode_declares_its_metrics_with_units():
     run = study_mode("run").metric_units(run_spec())
-    assert len(run) == 13 and run["cutoff_Hz"] == "Hz" and run["input_work_J"] == "J"
+    assert len(run) == 15 and run["cutoff_Hz"] == "Hz" and run["input_work_J"] == "J"
     assert run["peak_wall_force_N"] == "N" and run["granular_mass_kg"] == "kg" and run["footprint_m2"] == "m^2"
     rec = study_mode("reciprocity").metric_units(reciprocity_spec())
-    assert len(rec) == 19 and rec["nonreciprocity_index"] == "1" and rec["arrival_bwd_s"] == "s"
+    assert len(rec) == 21 and rec["nonreciprocity_index"] == "1" and rec["arrival_bwd_s"] == "s"
     assert {"peak_contact_force_fwd_N", "peak_contact_force_bwd_N", "peak_wall_force_fwd_N", "peak_wall_force_bwd_N"} < set(rec)
     both = study_mode("spectrum").metric_units(spectrum_spec(True))
-    assert len(both) == 2 * 13 + 1 + 2 + 4 and both["mobility_bwd"] == "m/(N s)" and both["nonreciprocity_db"] == "dB"
+    assert len(both) == 2 * 13 + 1 + 2 + 6 and both["mobility_bwd"] == "m/(N s)" and both["nonreciprocity_db"] == "dB"
     one = study_mode("spectrum").metric_units(spectrum_spec(False))
-    assert len(one) == 13 + 2 + 2 and "peak_wall_force_N" in one and "nonreciprocity_db" not in one
+    assert len(one) == 13 + 2 + 3 and "peak_wall_force_N" in one and "nonreciprocity_db" not in one
 
 
 @pytest.mark.parametrize("make", [reciprocity_spec, lambda: spectrum_spec(True, (22000.0,))], ids=["reciprocity", "spectrum"])
@@ -130,7 +130,7 @@ def test_a_case_reports_exactly_the_declared_metrics(tmp_path, make):
     spec = make()
     r = run_case(spec.model_dump_json(), ".", cases(spec)[0], str(tmp_path), keep_runs=False)
     assert r["status"] == "ok", r
-    assert set(r["metrics"]) == set(study_mode(spec.mode).metric_units(spec)) and len(r["metrics"]) in (19, 33)
+    assert set(r["metrics"]) == set(study_mode(spec.mode).metric_units(spec)) and len(r["metrics"]) in (21, 35)
     assert all(math.isfinite(v) for k, v in r["metrics"].items() if k.startswith("peak_") or k.startswith("mobility"))
 
 
@@ -191,11 +191,13 @@ def test_a_band_combines_its_frequencies_metrics():
     per = [{"mobility_fwd": 1e-3, "mobility_bwd": 1e-4, "transmissibility_fwd": 0.1, "transmissibility_bwd": 1.0,
             "steady_fwd": 1.0, "steady_bwd": 0.0, "balance_fwd": 1e-7, "balance_bwd": 2e-7, "nonreciprocity_db": 20.0,
             "granular_mass_kg": 0.08, "footprint_m2": 1e-3, "peak_wall_force_fwd_N": 3.0, "peak_wall_force_bwd_N": 1.0,
-            "peak_contact_force_fwd_N": 5.0, "peak_contact_force_bwd_N": 6.0},
+            "peak_contact_force_fwd_N": 5.0, "peak_contact_force_bwd_N": 6.0, "peak_solid_force_fwd_N": 0.0,
+            "peak_solid_force_bwd_N": 0.0},
            {"mobility_fwd": 1e-2, "mobility_bwd": 1e-2, "transmissibility_fwd": 1.0, "transmissibility_bwd": 1.0,
             "steady_fwd": 1.0, "steady_bwd": 1.0, "balance_fwd": 3e-7, "balance_bwd": 1e-7, "nonreciprocity_db": 0.0,
             "granular_mass_kg": 0.08, "footprint_m2": 1e-3, "peak_wall_force_fwd_N": 2.0, "peak_wall_force_bwd_N": 4.0,
-            "peak_contact_force_fwd_N": 7.0, "peak_contact_force_bwd_N": 6.0}]
+            "peak_contact_force_fwd_N": 7.0, "peak_contact_force_bwd_N": 6.0, "peak_solid_force_fwd_N": 0.0,
+            "peak_solid_force_bwd_N": 0.0}]
     m = study_mode("spectrum").trial_metrics(band, per)
     assert m["mobility_fwd_db"] == pytest.approx(-50.0) and m["mobility_fwd_db_max"] == pytest.approx(-40.0)
     assert m["mobility_bwd_db"] == pytest.approx(-60.0) and m["transmissibility_fwd_db"] == pytest.approx(-10.0)
@@ -203,4 +205,4 @@ def test_a_band_combines_its_frequencies_metrics():
     assert (m["nonreciprocity_db"], m["nonreciprocity_db_min"], m["nonreciprocity_db_max"]) == (10.0, 0.0, 20.0)
     assert (m["peak_wall_force_fwd_N"], m["peak_wall_force_bwd_N"], m["granular_mass_kg"]) == (3.0, 4.0, 0.08)
     assert m["peak_contact_force_fwd_N"] == 7.0 and m["footprint_m2"] == 1e-3
-    assert set(m) == set(study_mode("spectrum").trial_metric_units(band)) and len(m) == 21
+    assert set(m) == set(study_mode("spectrum").trial_metric_units(band)) and len(m) == 23
