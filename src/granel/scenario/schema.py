@@ -184,8 +184,8 @@ class PlateMeshSpec(_Strict):
 
 Edge = Literal["clamped", "simple", "fixed", "free"]
 # the [solid] fields of the kinds struck across their surface, refused on the kinds that do not read them
-SURFACE_FIELDS = frozenset({"shape", "edges", "surface_elements", "contact_refinement", "tension", "foundation",
-                            "bending_stiffness"})
+SURFACE_FIELDS = frozenset({"shape", "edges", "surface_elements", "contact_refinement", "plate_theory", "tension",
+                            "foundation", "bending_stiffness"})
 
 
 class SolidSpec(_Strict):
@@ -216,6 +216,9 @@ class SolidSpec(_Strict):
         "(default fixed; a disc's rim free only on a foundation)")
     surface_elements: int = Field(24, ge=2, le=400, description="bending_plate, membrane: elements along its length "
                                   "or diameter (and as many of the same size across its depth)")
+    plate_theory: Literal["kirchhoff", "mindlin"] = Field(
+        "kirchhoff", description="bending_plate: kirchhoff (thin: Morley triangles) or mindlin (thick: shear and "
+        "rotary inertia, P2 triangles for the deflection and the rotations)")
     contact_refinement: int = Field(0, ge=0, le=6, description="bending_plate, membrane: halve the elements this "
                                     "many times toward the contacts (a graded mesh: at each level the triangles within "
                                     "four of that level's elements of a contact are split)")

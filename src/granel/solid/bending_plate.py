@@ -253,7 +253,8 @@ class BendingPlateKind(BeamKind):
     drawn, exported and sampled along its line z = 0 as a beam is along its axis."""
 
     name = "bending_plate"
-    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape", "contact_refinement"}
+    fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape", "contact_refinement",
+                                                              "plate_theory"}
 
     edge_kinds = ("clamped", "simple", "free")  # the first is the default
     # Morley's frequency error at wavenumber K and element l: -0.18 (K l)^2 as K l -> 0 for waves along
@@ -305,13 +306,21 @@ class BendingPlateKind(BeamKind):
         return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length,
                     thickness=depth, E=material.E, rho=material.rho, nu=material.nu,
                     beam_elements=section.surface_elements, edges=edges, shape=section.shape,
-                    refinement=section.contact_refinement,
+                    refinement=section.contact_refinement, theory=section.plate_theory,
                     clamped=(edges[0] != "free", edges[min(1, len(edges) - 1)] != "free"))
 
     def build(self, recipe) -> SolidModel:
+        """Kirchhoff's thin plate on Morley triangles, or with `plate_theory = "mindlin"` the thick
+        plate of `mindlin.build_mindlin_plate`."""
         r = recipe
-        return build_bending_plate(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
-                                   r.beam_elements, r.edges, r.shape, r.refinement)
+        if r.theory == "mindlin":
+            from .mindlin import build_mindlin_plate
+
+            builder = build_mindlin_plate
+        else:
+            builder = build_bending_plate
+        return builder(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
+                       r.edges, r.shape, r.refinement)
 
     def size(self, section) -> tuple[int, int]:
         """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike); its
@@ -319,13 +328,14 @@ class BendingPlateKind(BeamKind):
         n_along x n_across cells of two triangles; the disc's 1 + 3 n (n + 1) vertices and 6 n^2
         triangles of n rings (its edges: vertices + triangles - 1, by Euler)."""
         ny = section.surface_elements
+        fields = 3 if getattr(section, "plate_theory", "kirchhoff") == "mindlin" else 1  # (w, beta) per node
         if section.shape == "disc":
             n = ny // 2
             vertices, triangles = 1 + 3 * n * (n + 1), 6 * n * n
-            return 2 * vertices + triangles - 1, 2 * n
+            return fields * (2 * vertices + triangles - 1), 2 * n
         nz = max(2, 2 * int(round(0.5 * ny * section.thickness / section.length)))
         vertices, cells = (ny + 1) * (nz + 1), ny * nz
-        return vertices + (ny * (nz + 1) + nz * (ny + 1) + cells), ny
+        return fields * (vertices + (ny * (nz + 1) + nz * (ny + 1) + cells)), ny
 
     def export_cells(self, model):
         return [("line", np.asarray(model.elements, dtype=np.int64))]
@@ -337,6 +347,11 @@ class BendingPlateKind(BeamKind):
         from skfem.helpers import dd
 
         h = model.info["width"]
+        basis = model.basis
+        if model.info.get("theory") == "mindlin":
+            from .mindlin import mindlin_rotation_stress
+
+            return self._per_segment(model, mindlin_rotation_stress(basis, x, E, nu, h))
 
         @Functional
         def surface_von_mises(w):
@@ -345,8 +360,13 @@ class BendingPlateKind(BeamKind):
             sy, sz, syz = c * (k[0, 0] + nu * k[1, 1]), c * (k[1, 1] + nu * k[0, 0]), c * (1 - nu) * k[0, 1]
             return np.sqrt(sy**2 - sy * sz + sz**2 + 3 * syz**2)
 
-        basis = model.basis
         per_triangle = surface_von_mises.elemental(basis, u=basis.interpolate(np.asarray(x, float))) / basis.dx.sum(1)
+        return self._per_segment(model, per_triangle)
+
+    @staticmethod
+    def _per_segment(model, per_triangle) -> dict:
+        """The largest of a per-triangle stress over the triangles of each segment of the line z = 0."""
+        basis = model.basis
         line_y = model.nodes[:, 1]
         centroid_y = basis.mesh.p[0, basis.mesh.t].mean(axis=0)
         segment = np.clip(np.searchsorted(line_y, centroid_y) - 1, 0, len(model.elements) - 1)
@@ -368,8 +388,17 @@ class BendingPlateKind(BeamKind):
         return int(model.recipe.beam_elements)
 
     def branches(self, model, k, count=3):
-        """The Kirchhoff plate's flexural branch f = k^2 sqrt(D / rho h) / 2 pi (plane waves along y)."""
-        return {"flexural": euler_bernoulli_frequency(k, model.info["D"], model.info["rhoh"])}
+        """The Kirchhoff plate's flexural branch f = k^2 sqrt(D / rho h) / 2 pi (plane waves along y);
+        a Mindlin plate's lowest branch of `mindlin.mindlin_frequencies` (shear and rotary inertia
+        bend it below Kirchhoff's as k h grows)."""
+        info = model.info
+        if info.get("theory") == "mindlin":
+            from .mindlin import mindlin_frequencies
+
+            f = [mindlin_frequencies(q, 0.0, info["D"], model.recipe.nu, info["shear"], info["rhoh"], info["rhoI"])[0]
+                 for q in np.atleast_1d(np.asarray(k, float))]
+            return {"flexural": np.asarray(f) / (2 * np.pi)}
+        return {"flexural": euler_bernoulli_frequency(k, info["D"], info["rhoh"])}
 
 
 BENDING_PLATE = BendingPlateKind()

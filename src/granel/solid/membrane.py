@@ -69,7 +69,7 @@ class MembraneKind(BendingPlateKind):
     """The tensioned membrane (`build_membrane`), seen edge-on as the plate in bending is."""
 
     name = "membrane"
-    fields = BendingPlateKind.fields | {"tension", "foundation"}
+    fields = BendingPlateKind.fields - {"plate_theory"} | {"tension", "foundation"}
 
     edge_kinds = ("fixed", "free")
     # P2's frequency error at wavenumber K and element l: +0.0012 (K l)^4 at most, measured against the

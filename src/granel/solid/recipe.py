@@ -35,8 +35,8 @@ class SolidRecipe:
     [kg/m^3], the contacts, the plate's mesh, the beam's or string's element count, the clamped
     (held) ends (bottom, top), the string's tension [N], its foundation's stiffness per length
     [N/m^2] and whether it bends, and a bending plate's edges (bottom, top, front, back: clamped,
-    simple or free; a disc's rim), shape (rectangle or disc) and the levels of its mesh's grading toward
-    the contacts. Fields a kind does not use keep their defaults."""
+    simple or free; a disc's rim), shape (rectangle or disc), the levels of its mesh's grading toward
+    the contacts and its theory (kirchhoff or mindlin). Fields a kind does not use keep their defaults."""
 
     kind: str
     contacts: tuple[RecipeContact, ...] = ()
@@ -57,6 +57,7 @@ class SolidRecipe:
     edges: tuple[str, ...] = ()
     shape: str = "rectangle"
     refinement: int = 0
+    theory: str = "kirchhoff"
 
     @property
     def slab(self) -> Slab:
@@ -85,8 +86,9 @@ class SolidRecipe:
         edges = tuple(str(e) for e in d.pop("edges", ()))
         shape = str(d.pop("shape", "rectangle"))
         refinement = int(d.pop("refinement", 0))
+        theory = str(d.pop("theory", "kirchhoff"))
         return cls(kind, contacts, mesh=mesh, beam_elements=elements, clamped=clamped, bending=bending, edges=edges,
-                   shape=shape, refinement=refinement, **{k: float(v) for k, v in d.items()})
+                   shape=shape, refinement=refinement, theory=theory, **{k: float(v) for k, v in d.items()})
 
 
 def build_solid_model(recipe: SolidRecipe) -> SolidModel:
