@@ -2,14 +2,15 @@
 (the "elastically supported membrane" of Zhang, Potekin, Li & Vakakis, Int. J. Solids Struct.
 182, 46, 2020): rho h w_tt - N lap w + k_f w = p, with N the tension per length [N/m] and k_f the
 foundation's stiffness per area [N/m^3]. Quadratic Lagrange triangles (scikit-fem's ElementTriP2)
-on the grid of `bending_plate.standing_surface`; docs/solids.md ("Membrane")."""
+on the grid of `surface.standing_surface`; docs/solids.md ("Membrane")."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .base import Material, Slab, SolidModel
-from .bending_plate import BendingPlateKind, standing_surface, surface_model
+from .bending_plate import BendingPlateKind
+from .surface import standing_surface, surface_model
 from .dispersion import string_frequency
 
 
@@ -45,7 +46,7 @@ def build_membrane(slab: Slab, material: Material, contacts, n_along: int = 24, 
     [N/m^3], on `standing_surface`'s P2 triangles (a disc's diameter the length). edges: a
     rectangle's (bottom, top, front, back), a disc's (rim,), each 'fixed' (w = 0) or 'free'. ValueError if it is free to move as a rigid body (no edge fixed, no
     foundation), or for a contact off a vertex of z = 0 or on a fixed edge. `refine`: the mesh
-    graded toward the contacts (`bending_plate.refined_toward`)."""
+    graded toward the contacts (`surface.refined_toward`)."""
     from skfem import ElementTriP2
 
     if foundation == 0 and all(e == "free" for e in edges):

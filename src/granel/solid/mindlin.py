@@ -7,7 +7,7 @@ count (Mindlin, J. Appl. Mech. 18, 31, 1951):
     T = 1/2 int rho h w_t^2 + rho h^3 / 12 |beta_t|^2,     kappa = sym grad beta,
 
 k = 5/6 the shear coefficient. Quadratic Lagrange triangles (scikit-fem's ElementTriP2) for w and
-for each rotation, on the same meshes as the thin plate (`bending_plate.standing_surface`);
+for each rotation, on the same meshes as the thin plate (`surface.standing_surface`);
 docs/solids.md ("Thick plates")."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Material, Slab, SolidModel
-from .bending_plate import flexural_rigidity, standing_surface, surface_model
+from .surface import flexural_rigidity, standing_surface, surface_model
 
 SHEAR_COEFFICIENT = 5.0 / 6.0  # Reissner's k of the shear force k G h (grad w - beta)
 
