@@ -89,8 +89,8 @@ def test_a_best_at_a_bound_and_a_missed_target_are_warned(tmp_path):
 
 
 def test_a_pareto_front_and_an_infeasible_study_are_warned(tmp_path):
-    """On a front, the designs at a bound are counted and a target is missed only when every
-    design of the front misses it; a study whose finished trials all break a constraint has no
+    """On a front, each design appears once, the designs at a bound are counted and a target is
+    missed only when every design of the front misses it; a study whose finished trials all break a constraint has no
     best design, and says so."""
     from granel.studies.design_trials import best_trials
 
@@ -98,9 +98,9 @@ def test_a_pareto_front_and_an_infeasible_study_are_warned(tmp_path):
     spec, _ = load_design(path)
     rows = [({"media.0.radius": 0.008}, [0.3, 2e-6], {"peak_wall_force_N": 1.8}, []),
             ({"media.0.radius": 0.005}, [0.1, 1e-6], {"peak_wall_force_N": 2.9}, [])]
-    study = _study(spec, rows)
+    study = _study(spec, [*rows, rows[1]])  # a sampler asking for the same values again (NSGA-II does)
     front = best_trials(spec, study)
-    assert len(front) == 2
+    assert len(front) == 2 and sorted(t.number for t in front) == [0, 1]  # each design once, its first trial
     warned = design_warnings(spec, study, front)
     assert warned[0].startswith("media.0.radius in 1 of the 2 Pareto designs is at its high bound 0.008")
     assert warned[1].startswith("no design of the Pareto front meets the target peak_wall_force_N = 2.6237: trial 1 "

@@ -223,8 +223,9 @@ def _status(t) -> str:
 
 def best_trials(spec: DesignSpec, study) -> list:
     """The best feasible trial (one objective) or the feasible Pareto front (several), best
-    first / in order of the first objective; for a screened study, among its confirmed trials,
-    by their values at the design's own accuracy (`confirmed_trials`)."""
+    first / in order of the first objective, each design once (a sampler that asks for values
+    already run, as NSGA-II does, leaves the first trial that ran them); for a screened study,
+    among its confirmed trials, by their values at the design's own accuracy (`confirmed_trials`)."""
     from optuna.trial import TrialState
 
     ok = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
@@ -238,7 +239,10 @@ def best_trials(spec: DesignSpec, study) -> list:
         return [min(ok, key=lambda t: signs[0] * t.values[0])]
     v = np.array([t.values for t in ok]) * signs
     front = [t for k, t in enumerate(ok) if not any(np.all(v[j] <= v[k]) and np.any(v[j] < v[k]) for j in range(len(ok)))]
-    return sorted(front, key=lambda t: signs[0] * t.values[0])
+    first: dict = {}
+    for t in sorted(front, key=lambda t: t.number):
+        first.setdefault(repr(sorted(t.params.items())), t)
+    return sorted(first.values(), key=lambda t: signs[0] * t.values[0])
 
 
 def design_scenario(spec: DesignSpec, base_dir: Path, params: dict) -> S.Scenario:
