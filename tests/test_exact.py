@@ -358,3 +358,33 @@ def test_modes_the_contacts_cannot_move_are_left_out_without_changing_the_run(mo
     assert moved.sum() <= kept and np.abs(full["solid_eta"].values[:, moved]).max() > 0
     np.testing.assert_allclose(eta[:, moved], full["solid_eta"].values[:, moved], rtol=1e-5,
                                atol=1e-6 * np.abs(eta).max())  # the record's float32
+
+
+def test_a_checkpoint_of_other_modes_is_refused_not_misread(tmp_path, monkeypatch):
+    """A checkpoint written while every mode was propagated (as before the silent modes were left
+    out) does not fit a solver that leaves them out: resuming from it is refused with a
+    CheckpointError saying so, instead of reading its modal state as this solver's; the same
+    checkpoint resumes where every mode is propagated again."""
+    from granel.coupling.exact import solver as exact_solver
+    from granel.io.checkpoint import CheckpointError
+
+    sc = S.load("chain-on-plate", ['simulation.duration="20us"', 'simulation.output_every="1us"',
+                                   'simulation.checkpoint_every="10us"'])
+    ck = tmp_path / "run.ckpt"
+
+    class Killed(Exception):
+        pass
+
+    def killer(t):
+        if t > 15e-6:
+            raise Killed
+
+    with monkeypatch.context() as m:
+        m.setattr(exact_solver, "SILENT", -1.0)
+        with pytest.raises(Killed):
+            run_scenario(sc, killer, ck)
+        assert ck.exists()
+    with pytest.raises(CheckpointError, match=r"holds the solid in 3481 modal coordinates, this run propagates \d+ "):
+        run_scenario(sc, None, ck, ck)
+    monkeypatch.setattr(exact_solver, "SILENT", -1.0)
+    assert run_scenario(sc, None, ck, ck)["time"].values[-1] == pytest.approx(20e-6)
