@@ -384,7 +384,9 @@ def test_a_checkpoint_of_other_modes_is_refused_not_misread(tmp_path, monkeypatc
         with pytest.raises(Killed):
             run_scenario(sc, killer, ck)
         assert ck.exists()
-    with pytest.raises(CheckpointError, match=r"holds the solid in 3481 modal coordinates, this run propagates \d+ "):
+    with pytest.raises(CheckpointError, match=r"^checkpoint .*run.ckpt: it holds the solid in 3481 modal coordinates, "
+                                               r"this run propagates \d+ ") as refused:
         run_scenario(sc, None, ck, ck)
+    assert refused.value.code == 2  # a wrong choice of checkpoint, as another scenario's is
     monkeypatch.setattr(exact_solver, "SILENT", -1.0)
     assert run_scenario(sc, None, ck, ck)["time"].values[-1] == pytest.approx(20e-6)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..io.checkpoint import load_checkpoint, save_checkpoint
+from ..io.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from ..io.trajectory import Stored, Trajectory
 from .observation import Observation, energy_ledger
 from .protocol import Solver
@@ -139,7 +139,10 @@ def drive(solver: Solver, schedule: Schedule, progress=None, checkpoint=None, re
 
     if resume is not None:
         arrays, recorded, _ = load_checkpoint(resume, fingerprint)
-        solver.restore(arrays)
+        try:
+            solver.restore(arrays)
+        except CheckpointError as e:  # the solver's own refusal: name the file
+            raise CheckpointError(f"checkpoint {resume}: {e}", 2) from None
         traj = Trajectory.unpack(recorded).keep(stored)
         k = int(arrays["k"])
         if "driver:ledger0" in arrays:

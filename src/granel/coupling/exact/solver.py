@@ -160,9 +160,9 @@ class ExactSolver:
         arrays = upgraded_checkpoint(arrays)
         nr, held = len(self.solid.omega), np.shape(arrays.get("st:eta", ()))
         if held != (nr,):
-            raise CheckpointError(f"the checkpoint holds the solid in {held[0] if held else 0} modal coordinates, this "
-                                  f"run propagates {nr} (it was written by a granel that kept other modes): run again "
-                                  "without resuming")
+            raise CheckpointError(f"it holds the solid in {held[0] if held else 0} modal coordinates, this run "
+                                  f"propagates {nr} (it was written by a granel that kept other modes): run again "
+                                  "without resuming", 2)
         motion = Motion(*[np.array(arrays[f"motion:{k}"]) for k in Motion._fields])
         last = LastStep(**{k: motion if k == "motion" else np.array(arrays[f"last:{k}"]) for k in LastStep._fields})
         fields = {k: np.array(arrays[f"st:{k}"]) for k in ExactState._fields if k not in ("last", "clock")}
