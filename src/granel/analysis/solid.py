@@ -35,9 +35,9 @@ def peak_displacement(ds, model, modes=None) -> tuple[float, float]:
     """The largest displacement of the solid's drawn nodes over its stored outputs [m] (|u| of
     `SolidModel.full_displacement`: a bending plate's or string's deflection along the line the
     granules touch, a plate's in-plane motion at its mesh nodes) and the stored time it occurs
-    [s]. A modal result is mapped mode by mode (each mode's nodal displacements, then the modal
-    coordinates over time), with the modes that never moved left out; a nodal one output by
-    output. ValueError for a result without the solid's state."""
+    [s]. A modal result maps the modes that moved to the nodes at once, then combines them by the
+    modal coordinates over time; a nodal one maps its states. ValueError for a result without
+    the solid's state."""
     from ..io.results import require
 
     if "solid_x" not in ds:
@@ -46,8 +46,7 @@ def peak_displacement(ds, model, modes=None) -> tuple[float, float]:
     if not len(times):
         return 0.0, float("nan")
     if "solid_x" in ds:
-        q = ds["solid_x"].values
-        u = np.stack([model.full_displacement(q[k].astype(float)) for k in range(len(q))])
+        u = np.moveaxis(model.full_displacement(ds["solid_x"].values.astype(float).T), 2, 0)
     else:
         if modes is None:
             from ..solid.mode_cache import all_modes
@@ -55,9 +54,9 @@ def peak_displacement(ds, model, modes=None) -> tuple[float, float]:
             modes = all_modes(model)
         eta = ds["solid_eta"].values.astype(float)
         moved = np.flatnonzero(np.abs(eta).max(axis=0) > 0)
-        shapes = np.stack([model.full_displacement(np.asarray(modes.shapes[:, i], float)) for i in moved]) \
-            if len(moved) else np.zeros((0, len(model.nodes), 2))
-        u = np.einsum("tm,mnc->tnc", eta[:, moved], shapes)
+        every = len(moved) == modes.shapes.shape[1]
+        shapes = model.full_displacement(np.asarray(modes.shapes if every else modes.shapes[:, moved], float))
+        u = np.tensordot(eta[:, moved], shapes, axes=([1], [2]))  # (outputs, nodes, 2)
     size = np.hypot(u[..., 0], u[..., 1])
     k = int(np.unravel_index(np.argmax(size), size.shape)[0])
     return float(size.max()), float(times[k])

@@ -67,7 +67,7 @@ class SolidModel:
     elements: np.ndarray | None = None  # (n_elements, k) node indices
     element_energies: object = None  # callable(q, v) -> (kinetic (ne,), strain (ne,))
     element_volume: np.ndarray | None = None
-    full_displacement: object = None  # callable(q) -> (n_nodes, 2)
+    full_displacement: object = None  # callable(q) -> (n_nodes, 2); q (ndof, m) -> (n_nodes, 2, m)
     recipe: object = None  # what it was built from (`solid.recipe.SolidRecipe`), if known
     unit_weight: np.ndarray | None = None  # (ndof, 2) T' M_full e_x, T' M_full e_y: the weight per m/s^2
 

@@ -76,9 +76,11 @@ def hermite_line(kind: str, slab: Slab, rhoA: float, ke: np.ndarray, contacts, n
     nodes = np.column_stack([np.full(nn, x0 + width / 2), ys])
     elems = np.column_stack([np.arange(n_elements), np.arange(1, nn)])
 
-    def full(q):
-        x = T @ q
-        return np.column_stack([x[0::2], np.zeros(nn)])
+    T_deflection = sp.csr_matrix(T)[0::2]  # the rows of the nodes' deflections
+
+    def full(q):  # (ndof,) -> (nn, 2); (ndof, m) -> (nn, 2, m)
+        x = T_deflection @ q
+        return np.stack([x, np.zeros_like(x)], axis=1)
 
     def energies(q, v):
         xq, xv = (T @ q)[d], (T @ v)[d]  # (ne, 4)

@@ -337,9 +337,11 @@ class CachedPlate(SolidModel):
     """A plate model from the cache: matrices, contacts and geometry; scikit-fem's basis (for the
     element energies and point probes) is assembled again on first use."""
 
-    def full(self, q):
-        x = self.T @ q
-        return np.column_stack([x[self.node_dofs[0]], x[self.node_dofs[1]]])
+    def full(self, q):  # (ndof,) -> (n_nodes, 2); (ndof, m) -> (n_nodes, 2, m)
+        if getattr(self, "_node_rows", None) is None:  # the rows of the nodes' x and y, sliced once
+            T = sp.csr_matrix(self.T)
+            self._node_rows = T[self.node_dofs[0]], T[self.node_dofs[1]]
+        return np.stack([self._node_rows[0] @ q, self._node_rows[1] @ q], axis=1)
 
     @property
     def basis(self):
@@ -441,9 +443,10 @@ def assemble_plate(slab: Slab, material: Material, layers: list[LayerSpec], mesh
     nv = mesh.p.shape[1]
     elem = np.hstack([mesh.t.T, nv + mesh.t2f.T])  # 4 corners + 4 edge midpoints
 
-    def full(q):
-        x = T @ q
-        return np.column_stack([x[node_dofx], x[node_dofy]])
+    T_nodes = sp.csr_matrix(T)[node_dofx], sp.csr_matrix(T)[node_dofy]  # the rows of the nodes' x and y
+
+    def full(q):  # (ndof,) -> (n_nodes, 2); (ndof, m) -> (n_nodes, 2, m)
+        return np.stack([T_nodes[0] @ q, T_nodes[1] @ q], axis=1)
 
     def energies(q, v):
         ue = basis.interpolate(T @ q)

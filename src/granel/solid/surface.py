@@ -153,9 +153,11 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
     segment_of = np.clip(np.searchsorted(line_y, p[0, mesh.t].mean(axis=0)) - 1, 0, len(segments) - 1)
     volumes = h * np.bincount(segment_of, basis.dx.sum(axis=1), len(segments))  # the triangles' areas
 
-    def full(q):
-        w = T @ q
-        return np.column_stack([w[u_dofs[on_line]], np.zeros(len(on_line))])
+    T_line = T.tocsr()[u_dofs[on_line]]  # the rows of the line's deflections
+
+    def full(q):  # (ndof,) -> (n_line, 2); (ndof, m) -> (n_line, 2, m)
+        w = T_line @ q
+        return np.stack([w, np.zeros_like(w)], axis=1)
 
     def energies(q, v):
         kin = kinetic.elemental(basis, speed=basis.interpolate(T @ v))
