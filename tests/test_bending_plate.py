@@ -335,6 +335,41 @@ def test_a_graded_mesh_keeps_its_edges_and_line_and_refines_only_near_the_contac
     assert math.sqrt(w2) * 0.05**2 * math.sqrt(STEEL.rho * H / D) == pytest.approx(10.2158, rel=abs(base / 10.2158 - 1))
 
 
+def test_the_estimate_counts_a_graded_mesh_once_the_contacts_are_placed(tmp_path, monkeypatch):
+    """The memory check reads the solid's size before anything is built; a mesh graded toward
+    its contacts holds many times the uniform grid's DOFs. Given the contacts' heights
+    (`SolidKind.size(section, focus)`, which the check passes once the granules are placed) the
+    count is the built mesh's own, before the held DOFs are removed (the same mesh, so exact);
+    without them it stays the uniform grid's, a lower bound. A run whose graded plate cannot fit
+    in memory is refused before it is built, naming its size."""
+    from granel.guard.exits import ResourceError
+    from granel.scenario.build import build_granular, check_scenario
+    from granel.scenario.estimate import run_needs, solid_dofs
+
+    def focus_of(system):
+        return [float(c.point[1]) for c in system.solid_contacts]
+
+    chain = ["media.0.radii=[0.005, 0.005, 0.005]"]
+    for over, shape in ((["solid.contact_refinement=3"], "rectangle"),
+                        (["solid.contact_refinement=2", 'solid.shape="disc"', 'solid.edges=["clamped"]',
+                          "solid.thickness=0.15", "solid.surface_elements=20"], "disc"),
+                        (["solid.contact_refinement=2", 'solid.plate_theory="mindlin"', "solid.surface_elements=10"],
+                         "rectangle")):
+        sc = S.load("chain-on-plate", chain + over)
+        system, _, _ = build_granular(sc)
+        focus = focus_of(system)
+        model = S.build_solid(sc, system)
+        assert sc.solid.shape == shape
+        assert solid_dofs(sc, focus)[0] == model.T.shape[0] > 1.3 * solid_dofs(sc)[0]
+    big = S.load("chain-on-plate", chain + ["solid.contact_refinement=4", "solid.surface_elements=10"])
+    system, _, _ = build_granular(big)
+    uniform, graded = run_needs(big).memory, run_needs(big, system.n, focus_of(system)).memory
+    assert graded > 4 * uniform
+    monkeypatch.setenv("GRANEL_MAX_MEMORY", str(int(math.sqrt(uniform * graded))))  # the first check passes
+    with pytest.raises(ResourceError, match=f"about {solid_dofs(big, focus_of(system))[0]:,} degrees of freedom"):
+        check_scenario(big)
+
+
 # ------------------------------------------------------------------------ a protector on the plate
 
 PROTECTOR = Path(__file__).resolve().parents[1] / "scenarios" / "designs" / "plate-protector.toml"

@@ -170,13 +170,15 @@ def build_granular(sc: Scenario, base: Path | None = None):
 def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     """Whole-scenario checks that need the built geometry, on a granular system built for them
     and then dropped (`build_problem` builds its own). The run's needs are estimated first
-    (`estimate.check_needs`), and again with the built granule count."""
+    (`estimate.check_needs`), and again with the built granule count and the contacts' heights
+    (a granules file, a solid's mesh graded toward its contacts)."""
     from .estimate import check_needs
 
     check_needs(sc)
     system, _, _ = build_granular(sc, base)
-    if any(m.granules_file for m in sc.media):
-        check_needs(sc, system.n)
+    s = present_solid(sc)
+    if any(m.granules_file for m in sc.media) or (s is not None and getattr(s, "contact_refinement", 0)):
+        check_needs(sc, system.n, [float(c.point[1]) for c in system.solid_contacts])
     check_geometry(sc, system)
     check_load_overlaps(sc, system)
     check_contact_rates(sc, system)

@@ -50,22 +50,24 @@ def granule_count(sc: Scenario) -> int:
     return n
 
 
-def solid_dofs(sc: Scenario) -> tuple[int, int]:
+def solid_dofs(sc: Scenario, focus=()) -> tuple[int, int]:
     """(degrees of freedom, elements) of the scenario's solid, at least, as its kind counts them
-    (`SolidKind.size`); (0, 0) without an elastic solid."""
+    (`SolidKind.size`; `focus`: the contacts' heights, once known); (0, 0) without an elastic
+    solid."""
     s = present_solid(sc)
-    return (0, 0) if s is None else kind_of(s.kind).size(s)
+    return (0, 0) if s is None else kind_of(s.kind).size(s, focus)
 
 
-def run_needs(sc: Scenario, granules: int | None = None) -> Needs:
-    """The memory and result size of a run of `sc` (`granules`: the built count, if known)."""
+def run_needs(sc: Scenario, granules: int | None = None, focus=()) -> Needs:
+    """The memory and result size of a run of `sc` (`granules`: the built count, if known;
+    `focus`: the heights y of the solid's contacts, if known)."""
     sim = sc.simulation
     n = granule_count(sc) if granules is None else granules
     outputs = int(min(sim.duration / sim.output_every, 1e18)) + 1
     fixed = not (sim.solver == "fast" and sim.integrator == "exact" and sim.adaptive)
     steps = int(min(sim.duration / (sim.dt if fixed else sim.max_step), 1e18))
-    ndof, nel = solid_dofs(sc)
-    contacts = sum(m.columns[0] if m.columns else 1 for m in sc.media if m.side != "none") if ndof else 0
+    ndof, nel = solid_dofs(sc, focus)
+    contacts = (len(focus) or sum(m.columns[0] if m.columns else 1 for m in sc.media if m.side != "none")) if ndof else 0
     solid_every = sim.solid_output_every or sim.output_every
     solid_outputs = int(min(sim.duration / solid_every, 1e18)) + 1 if ndof else 0
     modal = ndof if ndof <= DENSE_LIMIT else 0
@@ -79,11 +81,11 @@ def run_needs(sc: Scenario, granules: int | None = None) -> Needs:
     return Needs(n, outputs, steps, ndof, float(memory), float(result))
 
 
-def check_needs(sc: Scenario, granules: int | None = None) -> Needs:
+def check_needs(sc: Scenario, granules: int | None = None, focus=()) -> Needs:
     """ResourceError (exit 2) when a run of `sc` needs more memory than this process may use."""
     from ..guard.resources import check_memory
 
-    needs = run_needs(sc, granules)
+    needs = run_needs(sc, granules, focus)
     check_memory(needs.memory, f"this run ({needs.describe()})",
                  "lower the counts (media columns, solid mesh), simulation.duration, or store fewer outputs "
                  "(simulation.output_every, simulation.solid_output_every); GRANEL_MAX_MEMORY sets the limit")

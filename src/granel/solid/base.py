@@ -199,8 +199,10 @@ class SolidKind:
         """The solid of a `SolidRecipe` (ValueError for one that cannot be built)."""
         raise NotImplementedError
 
-    def size(self, section) -> tuple[int, int]:
-        """(degrees of freedom, elements) the solid will have, at least, before it is built."""
+    def size(self, section, focus=()) -> tuple[int, int]:
+        """(degrees of freedom, elements) the solid will have, at least, before it is built;
+        `focus`: the contacts' heights y once the granules are placed (a mesh graded toward them
+        counts them)."""
         return 0, 0
 
     def box(self, model: SolidModel) -> tuple[float, float, float, float]:

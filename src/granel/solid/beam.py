@@ -158,7 +158,7 @@ class BeamKind(SolidKind):
         return build_beam(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
                           r.clamped)
 
-    def size(self, section) -> tuple[int, int]:
+    def size(self, section, focus=()) -> tuple[int, int]:
         """Two DOFs (deflection, rotation) per node, before clamping."""
         return 2 * (section.beam_elements + 1), section.beam_elements
 

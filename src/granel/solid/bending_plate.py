@@ -163,13 +163,21 @@ class BendingPlateKind(BeamKind):
         return builder(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
                        r.edges, r.shape, r.refinement)
 
-    def size(self, section) -> tuple[int, int]:
-        """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike); its
-        elements as drawn and exported: the segments of its line z = 0. The rectangle's grid of
-        n_along x n_across cells of two triangles; the disc's 1 + 3 n (n + 1) vertices and 6 n^2
-        triangles of n rings (its edges: vertices + triangles - 1, by Euler)."""
+    def size(self, section, focus=()) -> tuple[int, int]:
+        """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike; three
+        P2 fields for Mindlin's); its elements as drawn and exported: the segments of its line
+        z = 0. The rectangle's grid of n_along x n_across cells of two triangles; the disc's
+        1 + 3 n (n + 1) vertices and 6 n^2 triangles of n rings (its edges: vertices + triangles - 1,
+        by Euler). A mesh graded toward the contacts is counted as built once their heights `focus`
+        are known (the mesh alone, `surface.surface_mesh`); before that, as if ungraded."""
         ny = section.surface_elements
         fields = 3 if getattr(section, "plate_theory", "kirchhoff") == "mindlin" else 1  # (w, beta) per node
+        if section.contact_refinement and len(focus):
+            from .surface import surface_mesh
+
+            mesh = surface_mesh(section.y0, section.length, section.thickness, ny, section.shape,
+                                section.contact_refinement, focus)
+            return fields * (mesh.p.shape[1] + mesh.facets.shape[1]), ny
         if section.shape == "disc":
             n = ny // 2
             vertices, triangles = 1 + 3 * n * (n + 1), 6 * n * n

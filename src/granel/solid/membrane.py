@@ -91,9 +91,9 @@ class MembraneKind(BendingPlateKind):
         return build_membrane(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts],
                               r.beam_elements, r.edges, r.tension, r.foundation, r.shape, r.refinement)
 
-    def size(self, section) -> tuple[int, int]:
+    def size(self, section, focus=()) -> tuple[int, int]:
         """P2: a DOF per vertex and per edge of the grid, as Morley has."""
-        return super().size(section)
+        return super().size(section, focus)
 
     def stress(self, model, x, E, nu):
         """The membrane stress N / h in every segment (its prestress)."""

@@ -549,7 +549,7 @@ class PlateKind(SolidKind):
         layers = [LayerSpec(c.name, c.edge, c.position[1], c.layer) for c in r.contacts]
         return build_plate(r.slab, r.material, layers, r.mesh, r.clamped)
 
-    def size(self, section) -> tuple[int, int]:
+    def size(self, section, focus=()) -> tuple[int, int]:
         """Rows of elements at least length / mesh.max_size (`plate_mesh`); Q8 nodes
         (2 nx + 1)(2 ny + 1) - nx ny, two DOFs each."""
         nx = section.mesh.nx

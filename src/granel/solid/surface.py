@@ -93,25 +93,37 @@ def refined_toward(mesh, points, levels: int, size: float):
     return mesh
 
 
-def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle", refine: int = 0,
-                     focus=()) -> Surface:
-    """The mesh of `slab`'s surface standing across the granular plane, with `element`'s basis. A
-    rectangle (y over its length, z over its thickness centred on the granular plane): the uniform
-    grid of n_along cells along y and as many of the same size along z (an even count: z = 0 is a
-    grid line), two triangles a cell. A disc (its diameter the length, centred on y0 + length / 2,
+def surface_mesh(y0: float, length: float, depth: float, n_along: int, shape: str = "rectangle", refine: int = 0,
+                 focus=()):
+    """The triangles of a surface standing across the granular plane (coordinates y, z). A rectangle
+    (y over [y0, y0 + length], z over depth centred on the granular plane): the uniform grid of
+    n_along cells along y and as many of the same size along z (an even count: z = 0 is a grid
+    line), two triangles a cell. A disc (its diameter the length, centred on y0 + length / 2,
     z = 0): `disc_mesh` with n_along / 2 rings, so n_along elements along its diameter. With
     `refine` > 0, graded toward the heights `focus` on z = 0 (the contacts) by `refined_toward`."""
-    from skfem import Basis, MeshTri
+    from skfem import MeshTri
 
-    y0, L, depth = slab.y0, slab.length, slab.thickness
     points = [(y, 0.0) for y in focus]
     if shape == "disc":
         rings = max(1, n_along // 2)
-        mesh = refined_toward(disc_mesh(y0 + L / 2, L / 2, rings), points, refine, L / (2 * rings))
+        return refined_toward(disc_mesh(y0 + length / 2, length / 2, rings), points, refine, length / (2 * rings))
+    nz = max(2, 2 * int(round(0.5 * n_along * depth / length)))
+    mesh = MeshTri.init_tensor(_axis(y0, length, n_along), _axis(-depth / 2, depth, nz))
+    return refined_toward(mesh, points, refine, length / n_along)
+
+
+def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle", refine: int = 0,
+                     focus=()) -> Surface:
+    """The mesh of `slab`'s surface standing across the granular plane (`surface_mesh`), with
+    `element`'s basis and the facets of its edges (a rectangle's bottom, top, front, back; a disc's
+    rim)."""
+    from skfem import Basis
+
+    y0, L, depth = slab.y0, slab.length, slab.thickness
+    mesh = surface_mesh(y0, L, depth, n_along, shape, refine, focus)
+    if shape == "disc":
+        rings = max(1, n_along // 2)
         return Surface(slab, mesh, Basis(mesh, element, intorder=4), {"rim": mesh.boundary_facets()}, 2 * rings)
-    nz = max(2, 2 * int(round(0.5 * n_along * depth / L)))
-    mesh = MeshTri.init_tensor(_axis(y0, L, n_along), _axis(-depth / 2, depth, nz))
-    mesh = refined_toward(mesh, points, refine, L / n_along)
     tol = 1e-9 * max(L, depth)
     where = {"bottom": lambda p: np.abs(p[0] - y0) < tol, "top": lambda p: np.abs(p[0] - y0 - L) < tol,
              "front": lambda p: np.abs(p[1] + depth / 2) < tol, "back": lambda p: np.abs(p[1] - depth / 2) < tol}
