@@ -177,6 +177,75 @@ def test_a_chain_striking_a_clamped_disc_at_its_centre_keeps_the_ledger():
     assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)
 
 
+# ------------------------------------------------------------------------ a plate on a foundation
+
+# the completely free square plate (nu = 0.3), w a^2 sqrt(rho h / D) of its first elastic modes: the
+# converged values of the literature (Gorman's superposition solutions); Leissa's 36-term Ritz values
+# (J. Sound Vib. 31, 257, 1973: 13.489, 19.789, 24.432, 35.024) lie above them, as Ritz's must
+FREE_SQUARE = np.array([13.468, 19.596, 24.270, 34.801])
+
+
+def test_a_foundation_adds_its_stiffness_over_the_mass_to_every_mode():
+    """A Winkler foundation k_f under the Kirchhoff plate adds k_f int w v to the stiffness, which
+    is k_f / rho h times its mass matrix (the same quadrature): every mode keeps its shape and
+    rises to w^2 = w0^2 + k_f / rho h (Kirchhoff's plate on a foundation). Both identities hold
+    to the round-off of the assembly and of the shift-invert solve. On Mindlin's plate the
+    foundation acts on w alone: its added stiffness is the w-block of the mass over rho h."""
+    from granel.solid.mindlin import build_mindlin_plate
+
+    kf, slab = 4e7, Slab(0.0, 0.0, H, 0.1, 0.08)
+    plain, held = (build_bending_plate(slab, STEEL, [], 12, ("clamped", "simple", "clamped", "free"), foundation=f)
+                   for f in (0.0, kf))
+    rho_h = STEEL.rho * H
+    eps = np.finfo(float).eps  # each entry: a few rounded sums of terms up to |K|max, then the difference
+    assert abs(held.K - plain.K - kf / rho_h * plain.M).max() <= 8 * eps * abs(plain.K).max()
+    w0 = eigsh(plain.K.tocsc(), 6, plain.M.tocsc(), sigma=0.0, which="LM")[0]
+    w1 = eigsh(held.K.tocsc(), 6, held.M.tocsc(), sigma=0.0, which="LM")[0]
+    assert np.sort(w1) - np.sort(w0) == pytest.approx(np.full(6, kf / rho_h), rel=1e-9)
+    thick = [build_mindlin_plate(slab, STEEL, [], 6, ("clamped",) * 4, foundation=f) for f in (0.0, kf)]
+    added = (thick[1].K - thick[0].K).toarray()
+    rows = np.flatnonzero(np.abs(added).sum(axis=1) > 1e-9 * np.abs(added).max())  # the deflection's DOFs
+    mass = thick[0].M.toarray()  # block diagonal: rho h int w v and rho h^3/12 int beta . psi
+    assert 0 < len(rows) < len(mass) / 2  # w is one field of three
+    error = np.abs(added[np.ix_(rows, rows)] - kf / rho_h * mass[np.ix_(rows, rows)]).max()
+    assert error <= 8 * eps * abs(thick[1].K).max()
+
+
+def test_a_free_square_plate_on_a_soft_foundation_rings_as_the_free_plate():
+    """Every edge free is refused (a rigid body) unless a foundation holds the plate, the way a
+    free plate is hung on soft supports in a modal test. On a soft one its three rigid motions
+    (w = 1, y, z: exact in Morley's space) ring at sqrt(k_f / rho h) to the solve's round-off,
+    and the elastic modes, the foundation's shift removed, converge at Morley's order toward the
+    free square's: Richardson's extrapolation from 16 and 32 elements lies within its own last
+    change (from 8 and 16) of the converged values."""
+    a, kf, rho_h = 0.1, 1e6, STEEL.rho * H
+    with pytest.raises(ValueError, match="solid.edges = .*free to move as a rigid body.*solid.foundation"):
+        build_bending_plate(Slab(0.0, 0.0, H, a, a), STEEL, [], 8, ("free",) * 4)
+    lam = {}
+    for n in (8, 16, 32):
+        m = build_bending_plate(Slab(0.0, 0.0, H, a, a), STEEL, [], n, ("free",) * 4, foundation=kf)
+        w2 = np.sort(eigsh(m.K.tocsc(), 7, m.M.tocsc(), sigma=0.0, which="LM")[0])
+        # the solve's backward error eps lambda_max is 1.1e-7 of k_f / rho h on the finest grid: 6e-8 in its root
+        assert np.sqrt(w2[:3] * rho_h / kf) == pytest.approx(np.ones(3), rel=1e-7)
+        lam[n] = np.sqrt(w2[3:] - kf / rho_h) * a**2 * math.sqrt(rho_h / D)
+    early, late = lam[16] + (lam[16] - lam[8]) / 3, lam[32] + (lam[32] - lam[16]) / 3
+    assert np.all(np.abs(late - FREE_SQUARE) <= np.abs(late - early))
+    assert np.all(lam[32] < FREE_SQUARE)  # Morley's plate is too soft, less so as it is refined
+
+
+def test_a_chain_on_a_free_plate_held_by_a_foundation_keeps_the_ledger():
+    """The built-in transducer with every edge of the plate free on a foundation (a plate lying
+    on rubber): accepted from the scenario file, struck, and the ledger (13) closed within the
+    exact integrator's bound; the foundation's energy is the solid's strain energy."""
+    sc = S.load(SCENARIO, ['solid.edges=["free", "free", "free", "free"]', "solid.foundation=2e7",
+                           "solid.surface_elements=12", 'simulation.duration="0.3ms"'])
+    ds = run_scenario(sc)
+    assert ds["energy_solid"].values.max() > 0.01 * ds["input_work"].values[-1]
+    assert np.abs(ds["balance_error"].values).max() <= ledger_bound(ds, sc)
+    with pytest.raises(ScenarioError, match="solid.edges: a bending_plate with every edge free moves as a rigid body"):
+        S.load(SCENARIO, ['solid.edges=["free", "free", "free", "free"]'])
+
+
 PLATE_IMPACT = Path(__file__).resolve().parents[1] / "scenarios" / "wavefield" / "plate-impact.toml"
 
 

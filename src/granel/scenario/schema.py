@@ -203,7 +203,7 @@ class SolidSpec(_Strict):
     tension: float = Field(0.0, ge=0.0, le=1e12, description="string: its tension [N]; membrane: its tension per "
                            "length [N/m] (> 0)")
     foundation: float = Field(0.0, ge=0.0, le=1e18, description="string: an elastic foundation's stiffness per length "
-                              "[N/m^2]; membrane: per area [N/m^3] (0: none)")
+                              "[N/m^2]; membrane, bending_plate: per area [N/m^3] (0: none)")
     bending_stiffness: bool = Field(False, description="string: add the cord's bending stiffness E I, I = thickness "
                                     "width^3 / 12 (a tensioned beam)")
     shape: Literal["rectangle", "disc"] = Field(
@@ -213,7 +213,7 @@ class SolidSpec(_Strict):
         None, min_length=1, max_length=4, description="bending_plate, membrane: a rectangle's four edges (bottom y0, "
         "top y0 + length, front z = -thickness/2, back z = +thickness/2), a disc's one (its rim): a plate's each "
         "clamped, simple (supported) or free (default clamped; a disc's rim clamped), a membrane's fixed or free "
-        "(default fixed; a disc's rim free only on a foundation)")
+        "(default fixed); every edge free (a disc's rim free) only on a foundation")
     surface_elements: int = Field(24, ge=2, le=400, description="bending_plate, membrane: elements along its length "
                                   "or diameter (and as many of the same size across its depth)")
     plate_theory: Literal["kirchhoff", "mindlin"] = Field(

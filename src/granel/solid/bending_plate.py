@@ -11,14 +11,15 @@ import numpy as np
 
 from .base import Material, Slab, SolidModel
 from .beam import BeamKind
-from .dispersion import euler_bernoulli_frequency
+from .dispersion import string_frequency
 from .surface import REFINE_ZONE, disc_mesh, refined_toward  # noqa: F401 (the surfaces' meshes, re-exported)
-from .surface import flexural_rigidity, standing_surface, surface_model
+from .surface import check_held, flexural_rigidity, standing_surface, surface_model
 
 
-def kirchhoff_forms(D: float, nu: float, rho_h: float):
-    """(stiffness, mass, strain energy density, kinetic energy density) of the Kirchhoff plate:
-    a(w, v) = int D ((1 - nu) w_,ij v_,ij + nu lap w lap v), m(w, v) = int rho h w v."""
+def kirchhoff_forms(D: float, nu: float, rho_h: float, foundation: float = 0.0):
+    """(stiffness, mass, strain energy density, kinetic energy density) of the Kirchhoff plate on
+    a foundation of stiffness k_f per area: a(w, v) = int D ((1 - nu) w_,ij v_,ij + nu lap w lap v)
+    + k_f w v, m(w, v) = int rho h w v."""
     from skfem import BilinearForm, Functional
     from skfem.helpers import dd, ddot, eye, trace
 
@@ -27,7 +28,7 @@ def kirchhoff_forms(D: float, nu: float, rho_h: float):
 
     @BilinearForm
     def stiffness(u, v, _):
-        return ddot(moments(dd(u)), dd(v))
+        return ddot(moments(dd(u)), dd(v)) + foundation * u * v
 
     @BilinearForm
     def mass(u, v, _):
@@ -35,7 +36,7 @@ def kirchhoff_forms(D: float, nu: float, rho_h: float):
 
     @Functional
     def strain(w):
-        return 0.5 * ddot(moments(dd(w["u"])), dd(w["u"]))
+        return 0.5 * (ddot(moments(dd(w["u"])), dd(w["u"])) + foundation * w["u"] ** 2)
 
     @Functional
     def kinetic(w):
@@ -45,20 +46,21 @@ def kirchhoff_forms(D: float, nu: float, rho_h: float):
 
 
 def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4,
-                        shape: str = "rectangle", refine: int = 0) -> SolidModel:
+                        shape: str = "rectangle", refine: int = 0, foundation: float = 0.0) -> SolidModel:
     """The Kirchhoff plate of `slab` (h = width, along x; the length along y; its depth along z =
     thickness, centred on the granular plane; a disc's diameter the length) on
     `standing_surface`'s Morley triangles. edges: a rectangle's (bottom, top, front, back), a
     disc's (rim,), each 'clamped' (w and its normal slope held), 'simple' (w held) or 'free'.
-    contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0. ValueError for edges that
-    leave it free to move as a rigid body, or a contact off a vertex or on a held edge. `refine`:
-    the mesh graded toward the contacts (`refined_toward`)."""
+    contacts: (name, edge 'left'/'right', y), each on a vertex of z = 0. `foundation`: a Winkler
+    foundation's stiffness per area k_f [N/m^3] under its whole face (0: none). ValueError for edges
+    that leave it free to move as a rigid body on no foundation, or a contact off a vertex or on a
+    held edge. `refine`: the mesh graded toward the contacts (`refined_toward`)."""
     from skfem import ElementTriMorley
 
     surface = standing_surface(slab, ElementTriMorley(), n_along, shape, refine, [c[2] for c in contacts])
     mesh, basis = surface.mesh, surface.basis
     D, rho_h = flexural_rigidity(material.E, material.nu, slab.width), material.rho * slab.width
-    stiffness, mass, strain, kinetic = kirchhoff_forms(D, material.nu, rho_h)
+    stiffness, mass, strain, kinetic = kirchhoff_forms(D, material.nu, rho_h, foundation)
     K, M = stiffness.assemble(basis).tocsr(), mass.assemble(basis).tocsr()
     fixed = np.zeros(basis.N, bool)
     for side, how in zip(surface.edge_facets, edges, strict=True):
@@ -73,12 +75,10 @@ def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int =
     rigid[u_dofs, 0], rigid[u_dofs, 1], rigid[u_dofs, 2] = 1.0, p[0] - slab.y0, p[1]
     slopes = _facet_normals(mesh)
     rigid[basis.facet_dofs[0], 1], rigid[basis.facet_dofs[0], 2] = slopes[0], slopes[1]
-    if np.linalg.matrix_rank(rigid[fixed], tol=1e-9) < 3:
-        raise ValueError(f"solid.edges = {list(edges)}: the plate is free to move as a rigid body (it needs an edge "
-                         "clamped, or three of its corners' lines held: two opposite edges simply supported, or "
-                         "one clamped)")
+    check_held(rigid, fixed, edges, foundation)
     return surface_model("bending_plate", surface, K, M, fixed, rigid[:, 0], contacts, strain, kinetic,
-                         {"D": D, "rhoh": rho_h, "thickness": slab.width})
+                         {"D": D, "rhoh": rho_h, "thickness": slab.width, "foundation": float(foundation)})
+
 
 
 def _facet_normals(mesh) -> np.ndarray:
@@ -95,7 +95,7 @@ class BendingPlateKind(BeamKind):
 
     name = "bending_plate"
     fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape", "contact_refinement",
-                                                              "plate_theory"}
+                                                              "plate_theory", "foundation"}
 
     edge_kinds = ("clamped", "simple", "free")  # the first is the default
     # Morley's frequency error at wavenumber K and element l: -0.18 (K l)^2 as K l -> 0 for waves along
@@ -120,7 +120,7 @@ class BendingPlateKind(BeamKind):
         if any(e not in self.edge_kinds for e in edges):
             raise ValueError(f"solid.edges = {list(edges)}: a {self.name}'s edges are each one of "
                              f"{', '.join(self.edge_kinds)}")
-        if all(e == "free" for e in edges) and not getattr(section, "foundation", 0):
+        if all(e == "free" for e in edges) and not section.foundation:
             raise ValueError(f"solid.edges: a {self.name} with every edge free moves as a rigid body; hold an edge")
 
     def _check_disc(self, section, edges) -> None:
@@ -129,7 +129,7 @@ class BendingPlateKind(BeamKind):
         its default or equal to the length)."""
         if len(edges) != 1:
             raise ValueError(f"solid.edges = {list(edges)}: a disc has one edge, its rim: give one value")
-        if edges[0] not in self.disc_edge_kinds and not (edges[0] == "free" and getattr(section, "foundation", 0)):
+        if edges[0] not in self.disc_edge_kinds and not (edges[0] == "free" and section.foundation):
             why = ("on the polygon that meshes the rim the solution tends to a different plate's (Babuska's paradox)"
                    if edges[0] == "simple" else "a free rim leaves it free to move as a rigid body")
             raise ValueError(f"solid.edges = {list(edges)}: a {self.name} disc's rim is "
@@ -147,7 +147,7 @@ class BendingPlateKind(BeamKind):
         return dict(x0=section.x0, y0=section.y0, width=section.width, length=section.length,
                     thickness=depth, E=material.E, rho=material.rho, nu=material.nu,
                     beam_elements=section.surface_elements, edges=edges, shape=section.shape,
-                    refinement=section.contact_refinement, theory=section.plate_theory,
+                    refinement=section.contact_refinement, theory=section.plate_theory, foundation=section.foundation,
                     clamped=(edges[0] != "free", edges[min(1, len(edges) - 1)] != "free"))
 
     def build(self, recipe) -> SolidModel:
@@ -161,7 +161,7 @@ class BendingPlateKind(BeamKind):
         else:
             builder = build_bending_plate
         return builder(r.slab, r.material, [(c.name, c.edge, c.position[1]) for c in r.contacts], r.beam_elements,
-                       r.edges, r.shape, r.refinement)
+                       r.edges, r.shape, r.refinement, r.foundation)
 
     def size(self, section, focus=()) -> tuple[int, int]:
         """A DOF per vertex and per edge of its triangles (Morley's and P2's count alike; three
@@ -237,17 +237,19 @@ class BendingPlateKind(BeamKind):
         return int(model.recipe.beam_elements)
 
     def branches(self, model, k, count=3):
-        """The Kirchhoff plate's flexural branch f = k^2 sqrt(D / rho h) / 2 pi (plane waves along y);
-        a Mindlin plate's lowest branch of `mindlin.mindlin_frequencies` (shear and rotary inertia
-        bend it below Kirchhoff's as k h grows)."""
+        """The Kirchhoff plate's flexural branch w^2 = (D k^4 + k_f) / rho h (plane waves along y; on a
+        foundation k_f, cut on at sqrt(k_f / rho h)); a Mindlin plate's lowest branch of
+        `mindlin.mindlin_frequencies` (shear and rotary inertia bend it below Kirchhoff's as k h
+        grows)."""
         info = model.info
+        kf = info.get("foundation", 0.0)
         if info.get("theory") == "mindlin":
             from .mindlin import mindlin_frequencies
 
-            f = [mindlin_frequencies(q, 0.0, info["D"], model.recipe.nu, info["shear"], info["rhoh"], info["rhoI"])[0]
+            f = [mindlin_frequencies(q, 0.0, info["D"], model.recipe.nu, info["shear"], info["rhoh"], info["rhoI"], kf)[0]
                  for q in np.atleast_1d(np.asarray(k, float))]
             return {"flexural": np.asarray(f) / (2 * np.pi)}
-        return {"flexural": euler_bernoulli_frequency(k, info["D"], info["rhoh"])}
+        return {"flexural": string_frequency(k, 0.0, info["rhoh"], info["D"], kf)}
 
 
 BENDING_PLATE = BendingPlateKind()

@@ -15,15 +15,15 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Material, Slab, SolidModel
-from .surface import flexural_rigidity, standing_surface, surface_model
+from .surface import check_held, flexural_rigidity, standing_surface, surface_model
 
 SHEAR_COEFFICIENT = 5.0 / 6.0  # Reissner's k of the shear force k G h (grad w - beta)
 
 
-def mindlin_forms(D: float, nu: float, shear: float, rho_h: float, rho_i: float):
+def mindlin_forms(D: float, nu: float, shear: float, rho_h: float, rho_i: float, foundation: float = 0.0):
     """(stiffness, mass, strain energy density, kinetic energy density) of the Mindlin plate with
-    bending stiffness D, shear stiffness k G h, mass per area rho h and rotary inertia rho h^3/12;
-    the fields are (w, beta)."""
+    bending stiffness D, shear stiffness k G h, mass per area rho h and rotary inertia rho h^3/12,
+    on a foundation of stiffness k_f per area (acting on w); the fields are (w, beta)."""
     from skfem import BilinearForm, Functional
     from skfem.helpers import ddot, dot, grad, sym_grad, trace
 
@@ -32,7 +32,7 @@ def mindlin_forms(D: float, nu: float, shear: float, rho_h: float, rho_i: float)
 
     @BilinearForm
     def stiffness(w, beta, v, psi, _):
-        return bending(sym_grad(beta), sym_grad(psi)) + shear * dot(grad(w) - beta, grad(v) - psi)
+        return bending(sym_grad(beta), sym_grad(psi)) + shear * dot(grad(w) - beta, grad(v) - psi) + foundation * w * v
 
     @BilinearForm
     def mass(w, beta, v, psi, _):
@@ -42,7 +42,7 @@ def mindlin_forms(D: float, nu: float, shear: float, rho_h: float, rho_i: float)
     def strain(f):
         w, beta = f["u"]
         gap = grad(w) - beta
-        return 0.5 * (bending(sym_grad(beta), sym_grad(beta)) + shear * dot(gap, gap))
+        return 0.5 * (bending(sym_grad(beta), sym_grad(beta)) + shear * dot(gap, gap) + foundation * w**2)
 
     @Functional
     def kinetic(f):
@@ -53,13 +53,14 @@ def mindlin_forms(D: float, nu: float, shear: float, rho_h: float, rho_i: float)
 
 
 def build_mindlin_plate(slab: Slab, material: Material, contacts, n_along: int = 24, edges=("clamped",) * 4,
-                        shape: str = "rectangle", refine: int = 0) -> SolidModel:
+                        shape: str = "rectangle", refine: int = 0, foundation: float = 0.0) -> SolidModel:
     """The Mindlin plate of `slab` (as `bending_plate.build_bending_plate`'s: h = width along x, the
     length along y, its depth along z; a disc's diameter the length) on P2 triangles for w and
     beta. edges: a rectangle's (bottom, top, front, back), a disc's (rim,), each 'clamped' (w and
     beta held), 'simple' (w and the rotation about the edge's normal, beta along the edge, held:
-    the hard simple support of Mindlin's exact solutions) or 'free'. ValueError for edges that
-    leave it a rigid motion, or a contact off a vertex of z = 0 or on a held edge."""
+    the hard simple support of Mindlin's exact solutions) or 'free'; `foundation` k_f [N/m^3] under
+    its face. ValueError for edges that leave it a rigid motion on no foundation, or a contact off
+    a vertex of z = 0 or on a held edge."""
     from skfem import ElementTriP2, ElementVector
 
     surface = standing_surface(slab, ElementTriP2() * ElementVector(ElementTriP2()), n_along, shape, refine,
@@ -68,7 +69,8 @@ def build_mindlin_plate(slab: Slab, material: Material, contacts, n_along: int =
     h = slab.width
     D = flexural_rigidity(material.E, material.nu, h)
     shear = SHEAR_COEFFICIENT * material.E / (2.0 * (1.0 + material.nu)) * h
-    stiffness, mass, strain, kinetic = mindlin_forms(D, material.nu, shear, material.rho * h, material.rho * h**3 / 12)
+    stiffness, mass, strain, kinetic = mindlin_forms(D, material.nu, shear, material.rho * h, material.rho * h**3 / 12,
+                                                     foundation)
     K, M = stiffness.assemble(basis).tocsr(), mass.assemble(basis).tocsr()
     fixed = np.zeros(basis.N, bool)
     along = {"bottom": "u^2^2", "top": "u^2^2", "front": "u^1^2", "back": "u^1^2"}  # beta tangent to each edge
@@ -84,13 +86,10 @@ def build_mindlin_plate(slab: Slab, material: Material, contacts, n_along: int =
     by, bz = basis.get_dofs().all(["u^1^2"]), basis.get_dofs().all(["u^2^2"])
     rigid[w_dofs, 0], rigid[w_dofs, 1], rigid[w_dofs, 2] = 1.0, p[0, w_dofs] - slab.y0, p[1, w_dofs]
     rigid[by, 1], rigid[bz, 2] = 1.0, 1.0
-    if np.linalg.matrix_rank(rigid[fixed], tol=1e-9) < 3:
-        raise ValueError(f"solid.edges = {list(edges)}: the plate is free to move as a rigid body (it needs an edge "
-                         "clamped, or three of its corners' lines held: two opposite edges simply supported, or "
-                         "one clamped)")
+    check_held(rigid, fixed, edges, foundation)
     model = surface_model("bending_plate", surface, K, M, fixed, rigid[:, 0], contacts, strain, kinetic,
                           {"D": D, "rhoh": material.rho * h, "thickness": h, "theory": "mindlin",
-                           "shear": shear, "rhoI": material.rho * h**3 / 12})
+                           "shear": shear, "rhoI": material.rho * h**3 / 12, "foundation": float(foundation)})
     del mesh
     return model
 
@@ -112,16 +111,18 @@ def mindlin_rotation_stress(basis, x, E: float, nu: float, h: float) -> np.ndarr
     return surface_von_mises.elemental(basis, u=basis.interpolate(np.asarray(x, float))) / basis.dx.sum(1)
 
 
-def mindlin_frequencies(ky, kz, D: float, nu: float, shear: float, rho_h: float, rho_i: float) -> np.ndarray:
+def mindlin_frequencies(ky, kz, D: float, nu: float, shear: float, rho_h: float, rho_i: float,
+                        foundation: float = 0.0) -> np.ndarray:
     """The three angular frequencies [rad/s] of the Mindlin plate's plane wave (or simply supported
     mode) with wavenumbers (ky, kz): w = W sin(ky y) sin(kz z), beta_y = B_y cos(ky y) sin(kz z),
     beta_z = B_z sin(ky y) cos(kz z) put in U and T give a 3 x 3 eigenproblem K q = w^2 M q, the
-    lowest the flexural branch, the others the thickness-shear ones."""
+    lowest the flexural branch, the others the thickness-shear ones (a foundation k_f adds to the
+    deflection's stiffness)."""
     from scipy.linalg import eigh
 
     s = shear
     K = np.array([
-        [s * (ky * ky + kz * kz), -s * ky, -s * kz],
+        [s * (ky * ky + kz * kz) + foundation, -s * ky, -s * kz],
         [-s * ky, D * (ky * ky + 0.5 * (1 - nu) * kz * kz) + s, 0.5 * D * (1 + nu) * ky * kz],
         [-s * kz, 0.5 * D * (1 + nu) * ky * kz, D * (kz * kz + 0.5 * (1 - nu) * ky * ky) + s],
     ])

@@ -131,6 +131,16 @@ def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle"
                    n_along)
 
 
+def check_held(rigid: np.ndarray, fixed: np.ndarray, edges, foundation: float) -> None:
+    """ValueError naming solid.edges when the held DOFs `fixed` leave a plate on no foundation one
+    of its rigid motions (the columns of `rigid`: w = 1, y, z at every DOF)."""
+    if foundation == 0 and np.linalg.matrix_rank(rigid[fixed], tol=1e-9) < 3:
+        raise ValueError(f"solid.edges = {list(edges)}: the plate is free to move as a rigid body (it needs an edge "
+                         "clamped, or three of its corners' lines held: two opposite edges simply supported, or "
+                         "one clamped; or a foundation under it, solid.foundation)")
+
+
+
 def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translation: np.ndarray, contacts, strain,
                   kinetic, info: dict) -> SolidModel:
     """The solid of a standing surface with stiffness K, mass M (full DOFs) and the DOFs `fixed`
