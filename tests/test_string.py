@@ -257,7 +257,25 @@ def test_a_granule_off_the_cords_nodes_is_named():
     """The paper's contact heights are multiples of L / 40; with 41 elements they fall between nodes."""
     sc = S.load("paper", ['solid.kind="string"', "solid.tension=10.0", "solid.beam_elements=41"])
     system, _, _ = S.build_granular(sc)
-    with pytest.raises(ScenarioError, match="solid: string contact LSGM:10 at y = .*: not on a node"):
+    with pytest.raises(ScenarioError, match="solid: string contact LSGM:10 at y = .*: not on a node.*50 is the first "
+                       "count from 41 that does"):
+        S.build_solid(sc, system)
+
+
+def test_the_refusal_proposes_the_first_grid_that_holds_every_contact():
+    """`fitting_elements`: the paper's contacts lie at 10, 30, 50, 70, 90 mm (LSGM) and 30 to 70 mm
+    every 10 mm (SSGM) of a 100 mm solid, so a grid holds them all exactly when its count is a
+    multiple of 10; a disc's count is even too; heights off every grid up to the limit get none,
+    and the plate in bending's refusal says so."""
+    from granel.solid.base import ELEMENTS_LIMIT, fitting_elements
+
+    heights = [0.01, 0.03, 0.05, 0.07, 0.09, 0.03, 0.04, 0.05, 0.06, 0.07]
+    assert [fitting_elements(0.0, 0.1, heights, n) for n in (2, 11, 24, 40, 395)] == [10, 20, 30, 40, 400]
+    assert fitting_elements(0.0, 0.1, [0.05, 0.02], 5, even=True) == 10  # 5 holds both, but a disc needs even
+    assert fitting_elements(0.0, 0.1, [0.05 + 1e-5], 2) is None and ELEMENTS_LIMIT == 400
+    sc = S.load("chain-on-plate", ["media.0.center_y=0.0751", "media.0.radii=[0.0047]"])
+    system, _, _ = S.build_granular(sc)
+    with pytest.raises(ScenarioError, match="not on a node of z = 0.*no count up to 400 does: move the granules"):
         S.build_solid(sc, system)
 
 

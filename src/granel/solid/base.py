@@ -257,3 +257,27 @@ def rigid_solid(contacts_positions: list[tuple[str, tuple[float, float], tuple[f
     z = sp.csr_matrix((0, 0))
     cps = [ContactPoint(n, p, nn, -1, -1, -1) for n, p, nn in contacts_positions]
     return SolidModel("rigid", z, z, cps, {"dofs": 0, "elements": 0})
+
+
+ELEMENTS_LIMIT = 400  # the largest element count a hint proposes (the schema's bound on surface_elements)
+
+
+def fitting_elements(y0: float, length: float, heights, at_least: int, even: bool = False) -> int | None:
+    """The smallest element count n >= at_least (even for a disc, whose centre is a vertex) whose
+    uniform grid y0 + i length / n holds every height (to the contact checks' 1e-9 of the length),
+    or None up to ELEMENTS_LIMIT."""
+    x = (np.asarray(heights, float) - y0) / length
+    for n in range(max(2, at_least), ELEMENTS_LIMIT + 1):
+        if even and n % 2:
+            continue
+        if np.all(np.abs(x * n - np.round(x * n)) <= 1e-9 * n):
+            return n
+    return None
+
+
+def fitting_hint(y0: float, length: float, heights, at_least: int, even: bool = False) -> str:
+    """What a refusal of a contact off the grid proposes: `fitting_elements`' count, or where to look."""
+    n = fitting_elements(y0, length, heights, at_least, even)
+    if n:
+        return f"{n} is the first count from {at_least} that does"
+    return f"no count up to {ELEMENTS_LIMIT} does: move the granules (center_y) or the solid (y0, length)"

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, LineSampling, Material, Patches, Shape, Slab, SolidKind, SolidModel
+from .base import ContactPoint, LineSampling, Material, Patches, Shape, Slab, SolidKind, SolidModel, fitting_hint
 from .dispersion import euler_bernoulli_frequency
 
 
@@ -67,7 +67,8 @@ def hermite_line(kind: str, slab: Slab, rhoA: float, ke: np.ndarray, contacts, n
         node = int(round((y - y0) / l))
         if not 0 <= node < nn or abs(ys[node] - y) > 1e-9 * length:
             raise ValueError(f"{kind} contact {name} at y = {y}: not on a node (element length {l:g} m); "
-                             "choose beam_elements so that every contact height is a node")
+                             "choose beam_elements so that every contact height is a node "
+                             f"({fitting_hint(y0, length, [c[2] for c in contacts], n_elements)})")
         if red[2 * node] < 0:
             raise ValueError(f"{kind} contact {name} at y = {y}: on a held end (solid.clamped)")
         xe = x0 if edge == "left" else x0 + width

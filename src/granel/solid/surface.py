@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .base import ContactPoint, Slab, SolidModel
+from .base import ContactPoint, Slab, SolidModel, fitting_hint
 
 EDGES = ("bottom", "top", "front", "back")  # y = y0, y = y0 + length, z = -depth/2, z = +depth/2
 RIM = ("rim",)  # a disc's one edge
@@ -38,6 +38,10 @@ class Surface:
     basis: object
     edge_facets: dict
     n_along: int
+
+    @property
+    def disc(self) -> bool:
+        return set(self.edge_facets) == set(RIM)
 
 
 def disc_mesh(center_y: float, radius: float, rings: int):
@@ -163,8 +167,10 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
     for name, edge, y in contacts:
         i = int(np.argmin(np.abs(line_y - y)))
         if abs(line_y[i] - y) > 1e-9 * L:
+            hint = fitting_hint(slab.y0, L, [c[2] for c in contacts], surface.n_along, even=surface.disc)
             raise ValueError(f"{kind} contact {name} at y = {y}: not on a node of z = 0 (element length "
-                             f"{L / surface.n_along:g} m); choose surface_elements so that every contact height is a node")
+                             f"{L / surface.n_along:g} m); choose surface_elements so that every contact height is a "
+                             f"node ({hint})")
         dof = int(red[u_dofs[on_line[i]]])
         if dof < 0:
             raise ValueError(f"{kind} contact {name} at y = {y}: on a held edge (solid.edges)")
