@@ -94,8 +94,8 @@ def _face_and_centre(m, solid) -> tuple[float, float]:
 
 def solid_contacts_for(sc: Scenario, media) -> list:
     """Contact points of the solid: the granules of column 0 of each medium beside the solid
-    (within its radius and the medium's gap of the face), at the face point nearest to the
-    centre. ScenarioError naming the medium for a granule of column 0 level with the solid's ends
+    (within its radius and the medium's gap of the face: those across a gap strike the solid once
+    they cross it), at the face point nearest to the centre. ScenarioError naming the medium for a granule of column 0 level with the solid's ends
     or beyond them (it would face no surface: it would pass the solid by, or strike its corner)."""
     s = present_solid(sc)
     if s is None:
@@ -116,8 +116,8 @@ def solid_contacts_for(sc: Scenario, media) -> list:
                         f"media.{k}: granule {med.name}:{med.labels[g]} faces the solid at y = {y:.6g} m, level with "
                         f"its ends or beyond them (solid.y0 = {s.y0:g}, solid.y0 + length = {s.y0 + s.length:g}): "
                         f"place the medium on the solid's face (media.{k}.center_y) or lengthen it (solid.length)")
-                if dist < R * (1 + 1e-9) + 1e-12:
-                    out.append(SolidContact(offset + g, (face, float(y)), nrm, f"{med.name}:{med.labels[g]}"))
+                # touching, or across the medium's gap: its Hertz force stays zero until the gap closes
+                out.append(SolidContact(offset + g, (face, float(y)), nrm, f"{med.name}:{med.labels[g]}"))
         offset += med.n
     return out
 

@@ -112,14 +112,14 @@ class BendingPlateKind(BeamKind):
 
     def check(self, section) -> None:
         edges = self.edges(section)
+        if any(e not in self.edge_kinds for e in edges):
+            raise ValueError(f"solid.edges = {list(edges)}: a {self.name}'s edges are each one of "
+                             f"{', '.join(self.edge_kinds)}")
         if section.shape == "disc":
             self._check_disc(section, edges)
         elif len(edges) != 4:
             raise ValueError(f"solid.edges = {list(edges)}: a rectangular {self.name} has four edges (bottom, top, "
                              "front, back)")
-        if any(e not in self.edge_kinds for e in edges):
-            raise ValueError(f"solid.edges = {list(edges)}: a {self.name}'s edges are each one of "
-                             f"{', '.join(self.edge_kinds)}")
         if all(e == "free" for e in edges) and not section.foundation:
             raise ValueError(f"solid.edges: a {self.name} with every edge free moves as a rigid body; hold an edge")
 

@@ -32,7 +32,7 @@ def residual_modes(model: SolidModel, B, shapes, keep, omega, partial: bool = Fa
     from scipy.linalg import eigh
 
     m2 = B.shape[0]
-    if np.all(keep) and not partial:
+    if m2 == 0 or (np.all(keep) and not partial):  # every mode kept, or no contact to feel the dropped ones
         return np.zeros(0), np.zeros((m2, 0)), np.zeros((m2, 0)), np.zeros((model.ndof, 0))
     if partial:
         from scipy.sparse.linalg import splu
