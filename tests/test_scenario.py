@@ -72,6 +72,10 @@ def test_paper_scenario_geometry(paper_raw):
         ('solid.kind="shell"', "solid.kind"),
         ('media.0.material="wood"', "media.0.material"),
         ("solid.width=0", "solid.width"),
+        ("solid.x0=1e4", "solid.x0"),  # positions beyond 1 km lose the digits an overlap needs (schema)
+        ("solid.y0=-2e3", "solid.y0"),
+        ("media.0.center_y=1e5", "media.0.center_y"),
+        ("media.1.face_x=5e3", "media.1.face_x"),
     ],
 )
 def test_invalid_fields_are_named(paper_raw, override, field):

@@ -161,6 +161,10 @@ class ContactSpec(_Strict):
 # spanning more than these lose their digits): lengths from 0.1 um to 10 km, moduli up to 1e20 Pa,
 # densities from 1e-3 (a rarefied gas) to 1e6 kg/m^3 (fifty times osmium's)
 LENGTH_MIN, LENGTH_MAX = 1e-7, 1e4
+# positions within 1 km of the origin: a granule's overlap with the solid (under a micrometre) is
+# the difference of two positions, which keep eps |x| of their value (1e4 m left 2e-12 m: the
+# steps fell to 1e-10 s and the ledger drifted); a solid's mesh is built in its own frame
+COORDINATE_MAX = 1e3
 
 
 class MaterialSpec(_Strict):
@@ -191,8 +195,8 @@ SURFACE_FIELDS = frozenset({"shape", "edges", "surface_elements", "contact_refin
 class SolidSpec(_Strict):
     kind: Literal["plate", "beam", "string", "bending_plate", "membrane", "rigid", "none"] = "plate"
     material: str = "steel"
-    x0: float = 0.0
-    y0: float = 0.0
+    x0: float = Field(0.0, ge=-COORDINATE_MAX, le=COORDINATE_MAX)
+    y0: float = Field(0.0, ge=-COORDINATE_MAX, le=COORDINATE_MAX)
     width: float = Field(0.01, ge=LENGTH_MIN, le=LENGTH_MAX)
     length: float = Field(0.1, ge=LENGTH_MIN, le=LENGTH_MAX)
     thickness: float = Field(0.001, ge=LENGTH_MIN, le=LENGTH_MAX)
@@ -248,14 +252,15 @@ class MediumSpec(_Strict):
     radius: float | None = Field(None, ge=LENGTH_MIN, le=LENGTH_MAX)
     material: str = "steel"
     columns: list[Annotated[int, Field(ge=1)]] | None = None
-    center_y: float | None = Field(None, description="y of column 0's centre (default: the solid's mid-length, or 0)")
-    face_x: float | None = Field(None, description="x of the face column 0 touches (default: the solid's face on this "
+    center_y: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX,
+                                   description="y of column 0's centre (default: the solid's mid-length, or 0)")
+    face_x: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX, description="x of the face column 0 touches (default: the solid's face on this "
                                                    "side, or 0): a medium anywhere")
     grow: Literal["left", "right", "up", "down"] | None = Field(
         None, description="direction the columns stack away from the face (default: the side; required with "
                           "side = 'none'); up/down: horizontal rows from the face line y = face_y")
-    face_y: float | None = Field(None, description="y of the face line of a medium growing up or down (default 0)")
-    center_x: float | None = Field(None, description="x of column 0's centre for a medium growing up or down (default 0)")
+    face_y: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX, description="y of the face line of a medium growing up or down (default 0)")
+    center_x: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX, description="x of column 0's centre for a medium growing up or down (default 0)")
     labels: Union[Literal["numeric", "alpha"], list[str]] = "numeric"
     channel_walls: bool | None = Field(None, description="rigid walls along the growth at both ends of column 0 "
                                                          "(default true, or as `walls` says)")

@@ -72,7 +72,7 @@ def build_bending_plate(slab: Slab, material: Material, contacts, n_along: int =
     # the rigid motions w = a + b y + c z (exact in Morley: vertex values, edge normal slopes)
     u_dofs, p = basis.nodal_dofs[0], mesh.p
     rigid = np.zeros((basis.N, 3))
-    rigid[u_dofs, 0], rigid[u_dofs, 1], rigid[u_dofs, 2] = 1.0, p[0] - slab.y0, p[1]
+    rigid[u_dofs, 0], rigid[u_dofs, 1], rigid[u_dofs, 2] = 1.0, p[0], p[1]  # the mesh's frame
     slopes = _facet_normals(mesh)
     rigid[basis.facet_dofs[0], 1], rigid[basis.facet_dofs[0], 2] = slopes[0], slopes[1]
     check_held(rigid, fixed, edges, foundation)
@@ -215,12 +215,8 @@ class BendingPlateKind(BeamKind):
     @staticmethod
     def _per_segment(model, per_triangle) -> dict:
         """The largest of a per-triangle stress over the triangles of each segment of the line z = 0."""
-        basis = model.basis
-        line_y = model.nodes[:, 1]
-        centroid_y = basis.mesh.p[0, basis.mesh.t].mean(axis=0)
-        segment = np.clip(np.searchsorted(line_y, centroid_y) - 1, 0, len(model.elements) - 1)
         out = np.zeros(len(model.elements))
-        np.maximum.at(out, segment, per_triangle)
+        np.maximum.at(out, model.segment_of, per_triangle)
         return {"surface_von_mises": out}
 
     def mode_kinds(self, model, shapes, which):

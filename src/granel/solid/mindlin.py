@@ -84,7 +84,7 @@ def build_mindlin_plate(slab: Slab, material: Material, contacts, n_along: int =
     p, rigid = basis.doflocs, np.zeros((basis.N, 3))
     w_dofs = basis.get_dofs().all(["u^1"])
     by, bz = basis.get_dofs().all(["u^1^2"]), basis.get_dofs().all(["u^2^2"])
-    rigid[w_dofs, 0], rigid[w_dofs, 1], rigid[w_dofs, 2] = 1.0, p[0, w_dofs] - slab.y0, p[1, w_dofs]
+    rigid[w_dofs, 0], rigid[w_dofs, 1], rigid[w_dofs, 2] = 1.0, p[0, w_dofs], p[1, w_dofs]  # the mesh's frame
     rigid[by, 1], rigid[bz, 2] = 1.0, 1.0
     check_held(rigid, fixed, edges, foundation)
     model = surface_model("bending_plate", surface, K, M, fixed, rigid[:, 0], contacts, strain, kinetic,

@@ -118,21 +118,29 @@ def surface_mesh(y0: float, length: float, depth: float, n_along: int, shape: st
 
 def standing_surface(slab: Slab, element, n_along: int, shape: str = "rectangle", refine: int = 0,
                      focus=()) -> Surface:
-    """The mesh of `slab`'s surface standing across the granular plane (`surface_mesh`), with
-    `element`'s basis and the facets of its edges (a rectangle's bottom, top, front, back; a disc's
-    rim)."""
+    """The mesh of `slab`'s surface standing across the granular plane (`surface_mesh`, in the
+    surface's frame: y from slab.y0), with `element`'s basis and the facets of its edges (a
+    rectangle's bottom, top, front, back; a disc's rim)."""
     from skfem import Basis
 
-    y0, L, depth = slab.y0, slab.length, slab.thickness
-    mesh = surface_mesh(y0, L, depth, n_along, shape, refine, focus)
+    # the mesh in the surface's own frame, y measured from slab.y0 (the elements' bases, Morley's
+    # global polynomials, lose digits to a large offset): `surface_model` adds y0 back
+    L, depth = slab.length, slab.thickness
+    mesh = surface_mesh(0.0, L, depth, n_along, shape, refine, [y - slab.y0 for y in focus])
     if shape == "disc":
         rings = max(1, n_along // 2)
         return Surface(slab, mesh, Basis(mesh, element, intorder=4), {"rim": mesh.boundary_facets()}, 2 * rings)
     tol = 1e-9 * max(L, depth)
-    where = {"bottom": lambda p: np.abs(p[0] - y0) < tol, "top": lambda p: np.abs(p[0] - y0 - L) < tol,
+    where = {"bottom": lambda p: np.abs(p[0]) < tol, "top": lambda p: np.abs(p[0] - L) < tol,
              "front": lambda p: np.abs(p[1] + depth / 2) < tol, "back": lambda p: np.abs(p[1] - depth / 2) < tol}
     return Surface(slab, mesh, Basis(mesh, element, intorder=4), {e: mesh.facets_satisfying(where[e]) for e in EDGES},
                    n_along)
+
+
+def segments_of(line: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """The segment of the sorted line vertices `line` each height in `ys` falls in (the ends'
+    segments take what lies beyond them)."""
+    return np.clip(np.searchsorted(line, ys) - 1, 0, len(line) - 2)
 
 
 def check_held(rigid: np.ndarray, fixed: np.ndarray, edges, foundation: float) -> None:
@@ -162,7 +170,8 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
     T = sp.csr_matrix((np.ones(len(keep)), (keep, np.arange(len(keep)))), shape=(basis.N, len(keep)))
     on_line = np.flatnonzero(np.abs(p[1]) < 1e-9 * max(L, slab.thickness))
     on_line = on_line[np.argsort(p[0, on_line])]
-    line_y = p[0, on_line]
+    line_local = p[0, on_line]  # the mesh's frame: y from slab.y0
+    line_y = slab.y0 + line_local
     cps = []
     for name, edge, y in contacts:
         i = int(np.argmin(np.abs(line_y - y)))
@@ -178,7 +187,7 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
         cps.append(ContactPoint(name, (xe, y), (1.0, 0.0) if edge == "left" else (-1.0, 0.0), dof, -1, -1))
     nodes = np.column_stack([np.full(len(on_line), slab.x0 + h / 2), line_y])
     segments = np.column_stack([np.arange(len(on_line) - 1), np.arange(1, len(on_line))])
-    segment_of = np.clip(np.searchsorted(line_y, p[0, mesh.t].mean(axis=0)) - 1, 0, len(segments) - 1)
+    segment_of = segments_of(line_local, p[0, mesh.t].mean(axis=0))
     volumes = h * np.bincount(segment_of, basis.dx.sum(axis=1), len(segments))  # the triangles' areas
 
     T_line = T.tocsr()[u_dofs[on_line]]  # the rows of the line's deflections
@@ -197,6 +206,7 @@ def surface_model(kind: str, surface: Surface, K, M, fixed: np.ndarray, translat
     model = SolidModel(kind, (T.T @ M @ T).tocsr(), (T.T @ K @ T).tocsr(), cps, info, T, nodes, segments, energies,
                        volumes, full)
     model.basis = basis
+    model.segment_of = segment_of  # each triangle's segment of the line z = 0
     model.line_dofs = u_dofs[on_line]
     model.unit_weight = np.column_stack([T.T @ (M @ translation), np.zeros(len(keep))])
     return model
