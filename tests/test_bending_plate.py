@@ -529,6 +529,28 @@ def test_the_estimate_counts_a_graded_mesh_once_the_contacts_are_placed(tmp_path
         check_scenario(big)
 
 
+def test_a_large_plates_factors_and_lanczos_vectors_are_counted(monkeypatch):
+    """Beyond 8,000 DOFs a solid is factorised and its lowest modes found by Lanczos; the
+    estimate counts SuperLU's factors as FILL n^1.5 entries (a lower bound of what scipy's splu
+    holds for Morley's and Mindlin's plates, measured here on meshes past the limit) and
+    3 x 600 Lanczos vectors for the exact integrator. The thick plate of 400 elements (1.9 million
+    DOFs) that once ran into swap is refused before it is built, even with 24 GB to spend."""
+    from scipy.sparse.linalg import splu
+
+    from granel.guard.exits import ResourceError
+    from granel.scenario.estimate import FILL
+    from granel.solid.mindlin import build_mindlin_plate
+
+    for build, n in ((build_bending_plate, 60), (build_mindlin_plate, 30)):
+        m = build(Slab(0.0, 0.0, H, 0.1, 0.1), STEEL, [], n, ("clamped",) * 4)
+        assert m.ndof > 8000
+        lu = splu(m.K.tocsc())
+        assert FILL * m.ndof**1.5 <= lu.L.nnz + lu.U.nnz
+    monkeypatch.setenv("GRANEL_MAX_MEMORY", "24G")
+    with pytest.raises(ResourceError, match="1,924,803 degrees of freedom.*GiB of memory"):
+        S.load(SCENARIO, ['solid.plate_theory="mindlin"', "solid.surface_elements=400"])  # loading checks it
+
+
 # ------------------------------------------------------------------------ a protector on the plate
 
 PROTECTOR = Path(__file__).resolve().parents[1] / "scenarios" / "designs" / "plate-protector.toml"

@@ -43,6 +43,14 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 # ------------------------------------------------------------------------------------------ helpers
 
 
+
+def _elastic(sc) -> bool:
+    """Whether the scenario's solid moves (it has modes to solve for before the first step)."""
+    from .solid.kinds import is_elastic
+
+    return sc.solid is not None and is_elastic(sc.solid.kind)
+
+
 def _fail(msg: str, code: int = 2):
     """End the command with `msg` as its one error line and exit `code` (printed by the group once
     the command's progress bars have closed, so that it is the last line on standard error)."""
@@ -133,7 +141,9 @@ def run(
         console.print(f"removed {tmp}, left by an interrupted run")
     total = sc.simulation.duration
     with progress_bar(counted=False, extra=[TextColumn("t = {task.fields[t]}")]) as bar:
-        task = bar.add_task(f"{sc.name} ({sc.solid.kind if sc.solid else 'rigid'})", total=total, t="0")
+        # until the first step: building the problem and, for an elastic solid, its modes (minutes for a large one)
+        task = bar.add_task(f"{sc.name} ({sc.solid.kind if sc.solid else 'rigid'})", total=total,
+                            t="0 (setting up: the solid's matrices and modes)" if _elastic(sc) else "0")
         try:  # a stopped run (run.RunStopped) ends with its own line, "run stopped: ...", exit 3
             summary = run_to_file(sc, output, lambda t: bar.update(task, completed=min(t, total), t=f"{t * 1e3:.4f} ms"),
                                   checkpoint=ckpt, resume=resume, max_wall=wall_limit)
