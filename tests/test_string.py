@@ -243,6 +243,7 @@ def test_struck_cord_ridges_lie_on_the_string_branch_with_its_cut_on(tmp_path):
     T, kf, rho_a = 500.0, 7.7e6, 7850.0 * 1e-3 * 1e-3
     assert (r.tension, r.foundation, r.rho * r.width * r.thickness) == (T, kf, pytest.approx(rho_a, rel=1e-15))
     wf = analyse_wavefield(ds, model, result_modes(ds))
+    assert np.isfinite(wf.kinetic_check)  # the cord's axis is the whole cord: its energy is checked
     ridges = wf.ridges
     keep = (ridges.k >= wf.k_window) & (ridges.k <= wf.k_resolved) & (ridges.f <= 0.9 * wf.fk.f[-1])
     k, f = ridges.k[keep], ridges.f[keep]

@@ -125,6 +125,7 @@ class NodeLines:
     sampling: sp.csr_matrix
     element: float
     dispersion: tuple[float, int] = (QUADRATIC_DISPERSION, 4)
+    whole: bool = True  # the lines carry the solid's whole motion (`solid.base.LineSampling.whole`)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -139,7 +140,7 @@ def node_lines(model, samples: int | None = None) -> NodeLines:
     r = model.recipe
     basis = spatial_basis(r.y0, r.length, lines.count, tuple(bool(c) for c in r.clamped))
     return NodeLines(model.kind, lines.x, lines.mass, lines.components, basis, (lines.sampler(basis.y) @ model.T).tocsr(),
-                     lines.element, lines.dispersion)
+                     lines.element, lines.dispersion, lines.whole)
 
 
 def resolved_wavenumber(lines: NodeLines, error: float = FE_ERROR) -> float:
@@ -437,7 +438,8 @@ class Wavefield:
     (nb, N, nt) [J/m]), the frequency-wavenumber map with its ridges over k_window <= k <= k_max,
     and the analytic branches up to `k_plot`. `kinetic_check`: the largest difference of E(k, t)
     summed over k from the solid's kinetic energy 1/2 v'M v, relative to the latter's largest
-    value (the width's trapezoid rule against the consistent mass)."""
+    value (the width's trapezoid rule against the consistent mass); NaN where the lines do not
+    carry the solid's whole motion (a surface standing across the granular plane)."""
 
     lines: NodeLines
     spectrum: WavenumberSpectrum
@@ -534,7 +536,9 @@ def analyse_wavefield(ds, model, modes=None, settings: WavefieldSettings | None 
     k_plot = float(min(fk.k[-1], 1.5 * k_max))
     branches = solid_branches(model, np.linspace(0.0, k_plot, 241), settings.branch_count)
     check = np.nan
-    if "energy_solid_kinetic" in ds and "time" in ds:  # the solid's 1/2 v'M v, at the solid outputs
+    # the solid's 1/2 v'M v, at the solid outputs; a line that does not carry the whole motion (a
+    # surface's z = 0) is not the solid's energy: no check
+    if lines.whole and "energy_solid_kinetic" in ds and "time" in ds:
         ke = np.interp(t, np.asarray(ds["time"].values, float), np.asarray(ds["energy_solid_kinetic"].values, float))
         if ke.max() > 0:
             check = float(np.max(np.abs(spectrum.energy.sum(axis=0) - ke)) / ke.max())

@@ -161,7 +161,10 @@ class LineSampling:
     sampled on each, `count` samples along the length, `element` the longest element along it [m],
     and `sampler(y)`: the sparse map from the full nodal DOFs (T q) to the samples at heights y,
     rows ordered (line, component, sample). `dispersion` (C, p): the elements' relative frequency
-    error |C| (k l)^p at wavenumber k (l = element), as measured or derived for their kind."""
+    error |C| (k l)^p at wavenumber k (l = element), as measured or derived for their kind.
+    `whole`: the lines carry the solid's whole motion (a plate's columns across its width, a
+    beam's axis), so their kinetic energy is the solid's; a surface standing across the granular
+    plane is sampled on one line, z = 0, whose energy stands for a uniform motion across its depth."""
 
     x: np.ndarray
     mass: np.ndarray
@@ -170,6 +173,7 @@ class LineSampling:
     element: float
     sampler: Callable[[np.ndarray], sp.csr_matrix]
     dispersion: tuple[float, int] = (QUADRATIC_DISPERSION, 4)
+    whole: bool = True
 
 
 class SolidKind:

@@ -146,6 +146,7 @@ def bending_stress(model: SolidModel, E: float, x: np.ndarray) -> dict[str, np.n
 class BeamKind(SolidKind):
     """The Euler-Bernoulli beam of eq. (9) (`build_beam`), drawn as its centre line."""
 
+    line_is_whole = True  # its axis carries its whole motion (`LineSampling.whole`)
     name = "beam"
     fields = SolidKind.fields | {"material", "thickness", "beam_elements", "clamped"}
 
@@ -221,7 +222,7 @@ class BeamKind(SolidKind):
             return sp.csr_matrix((np.ones(len(at)), (np.arange(len(at)), dofs[at])), shape=(len(at), full))
 
         return LineSampling(np.array([r.x0 + r.width / 2]), np.array([r.rho * r.width * r.thickness]), ("x",), count,
-                            float(r.length / ne), sampler, self.dispersion)
+                            float(r.length / ne), sampler, self.dispersion, self.line_is_whole)
 
     def branches(self, model, k, count=3):
         """The Euler-Bernoulli branch (EB) of its EI and rho A."""

@@ -94,6 +94,7 @@ class BendingPlateKind(BeamKind):
     drawn, exported and sampled along its line z = 0 as a beam is along its axis."""
 
     name = "bending_plate"
+    line_is_whole = False  # sampled on its line z = 0 alone (`LineSampling.whole`)
     fields = BeamKind.fields - {"beam_elements", "clamped"} | {"edges", "surface_elements", "shape", "contact_refinement",
                                                               "plate_theory", "foundation"}
 
