@@ -95,8 +95,9 @@ def _face_and_centre(m, solid) -> tuple[float, float]:
 def solid_contacts_for(sc: Scenario, media) -> list:
     """Contact points of the solid: the granules of column 0 of each medium beside the solid
     (within its radius and the medium's gap of the face: those across a gap strike the solid once
-    they cross it), at the face point nearest to the centre. ScenarioError naming the medium for a granule of column 0 level with the solid's ends
-    or beyond them (it would face no surface: it would pass the solid by, or strike its corner)."""
+    they cross it), at the face point nearest to the centre. ScenarioError naming the medium for a
+    granule of column 0 level with the solid's ends or beyond them (it would face no surface: it
+    would pass the solid by, or strike its corner)."""
     s = present_solid(sc)
     if s is None:
         return []
@@ -177,7 +178,7 @@ def check_scenario(sc: Scenario, base: Path | None = None) -> None:
     check_needs(sc)
     system, _, _ = build_granular(sc, base)
     s = present_solid(sc)
-    if any(m.granules_file for m in sc.media) or (s is not None and getattr(s, "contact_refinement", 0)):
+    if any(m.granules_file for m in sc.media) or (s is not None and s.contact_refinement):
         check_needs(sc, system.n, [float(c.point[1]) for c in system.solid_contacts])
     check_geometry(sc, system)
     check_load_overlaps(sc, system)
