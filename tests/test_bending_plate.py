@@ -288,7 +288,7 @@ def test_the_papers_interface_with_a_bent_plate_runs_both_ways_and_keeps_the_led
 
     overrides = ["solid.surface_elements=10"]
     sc = S.load(str(PAPER_BENT), overrides)
-    system, _, _ = __import__("granel.scenario.build", fromlist=["build_granular"]).build_granular(sc)
+    system, _, _ = S.build_granular(sc)
     faces = sorted(c.name.split(":")[0] for c in system.solid_contacts)
     assert faces == ["LSGM"] * 5 + ["SSGM"] * 5
     res = CliRunner().invoke(app, ["reciprocity", str(PAPER_BENT), "--duration", "0.2ms", "--out", str(tmp_path),
@@ -446,7 +446,7 @@ def test_a_solid_no_granule_faces_runs_and_stays_at_rest(integrator):
     sc = S.load(SCENARIO, ['media.0.side="none"', 'media.0.grow="left"', "media.0.face_x=-0.01",
                            "excitations.0.direction=[1.0, 0.0]", f'simulation.integrator="{integrator}"',
                            'simulation.duration="50us"'])
-    system, _, _ = __import__("granel.scenario.build", fromlist=["build_granular"]).build_granular(sc)
+    system, _, _ = S.build_granular(sc)
     assert not system.solid_contacts
     ds = run_scenario(sc)
     assert np.all(ds["energy_solid"].values == 0.0) and ds["input_work"].values[-1] > 0
