@@ -335,7 +335,9 @@ def _stopped(args, sig, after):
 
 
 def test_sigterm_ends_a_run_with_143_and_one_line(tmp_path):
-    code, err = _stopped(["run", "paper", "--solid", "plate", "--duration", "20ms", "-o", tmp_path / "o.nc"],
+    # 200 ms of the paper's case take half a minute or more: the signal at 6 s finds it computing on any
+    # machine (20 ms ran in 3.7 s on a fast one, and the signal then met the end of the command)
+    code, err = _stopped(["run", "paper", "--solid", "plate", "--duration", "200ms", "-o", tmp_path / "o.nc"],
                          signal.SIGTERM, 6)
     assert code == 143, err
     assert "Traceback" not in err and [line for line in err.splitlines() if line.startswith("error:")][-1].startswith(
