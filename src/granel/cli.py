@@ -43,7 +43,6 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 # ------------------------------------------------------------------------------------------ helpers
 
 
-
 def _elastic(sc) -> bool:
     """Whether the scenario's solid moves (it has modes to solve for before the first step)."""
     from .solid.kinds import is_elastic
